@@ -1,0 +1,254 @@
+"""Bounded MI maximisation over one or many scenes, coarse to fine.
+
+:func:`calibrate` is blocking and GUI-free: run it in a worker thread, follow it through
+``on_progress`` (called from that thread after every objective evaluation) and stop it from any
+thread by setting the ``cancel`` event; it then returns the best extrinsic found so far.
+
+The search is over a correction ``(dt, dw)`` of the seed (camera frame; ``R = exp(dw) R_seed``,
+``t = t_seed + dt``) bounded per axis by ``translation_bound`` metres and
+``rotation_bound_deg`` degrees. Stages run from wide to narrow map smoothing (and from a thinned
+to the full point set): the wide stages see a basin several degrees across, the last one is the
+paper's objective at ``sigma``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .camera import CameraModel
+from .geometry import Extrinsic
+from .objective import SceneStack, SmoothObjective
+from .scenes import Scene
+
+METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
+GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One pass of the optimiser: map smoothing ``sigma`` (px), every ``step``-th point."""
+
+    sigma: float
+    step: int = 1
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """What the optimiser does. The defaults reach seeds 0.1 m / 0.1 rad per axis away."""
+
+    method: str = "SLSQP"
+    translation_bound: float = 0.2  # m, per axis, around the seed
+    rotation_bound_deg: float = 10.0  # deg, per axis, around the seed
+    sigma: float = 5.0  # px, map smoothing of the final stage (the reference code's value)
+    coarse_to_fine: bool = True
+    rotation_only: bool = False
+    max_iterations: int = 100  # per stage
+    stages: tuple[Stage, ...] | None = None  # overrides the schedule derived from sigma
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"unknown optimiser {self.method!r}; expected one of {', '.join(METHODS)}")
+        if self.translation_bound < 0 or self.rotation_bound_deg <= 0:
+            raise ValueError("bounds must be positive")
+        if self.sigma < 0:
+            raise ValueError("sigma must be >= 0")
+
+    def schedule(self) -> tuple[Stage, ...]:
+        if self.stages:
+            return self.stages
+        if not self.coarse_to_fine:
+            return (Stage(self.sigma, 1),)
+        return (Stage(4 * self.sigma, 8), Stage(2 * self.sigma, 3), Stage(self.sigma, 1))
+
+
+@dataclass(frozen=True)
+class Progress:
+    """A snapshot sent to ``on_progress`` after each objective evaluation."""
+
+    evaluations: int
+    stage: int  # 0-based
+    stages: int
+    mi: float  # objective value of this evaluation (the stage's smoothing)
+    best_mi: float  # best objective value in this stage
+    best: Extrinsic
+    fraction: float  # 0..1, a rough share of the work done
+    elapsed: float  # seconds
+
+
+@dataclass
+class CalibrationResult:
+    extrinsic: Extrinsic
+    seed: Extrinsic
+    settings: CalibrationSettings
+    scene_names: list[str]
+    mi_seed: float
+    mi_result: float
+    mi_seed_per_scene: np.ndarray
+    mi_result_per_scene: np.ndarray
+    evaluations: int
+    seconds: float  # optimisation wall time
+    cancelled: bool = False
+    history: list[tuple[int, float, int]] = field(default_factory=list)  # (evaluation, MI, stage)
+    message: str = ""
+
+    @property
+    def improved(self) -> bool:
+        return self.mi_result > self.mi_seed
+
+
+class _Cancelled(Exception):
+    pass
+
+
+def calibrate(
+    scenes: Sequence[Scene] | SceneStack,
+    camera: CameraModel | None,
+    seed: Extrinsic,
+    settings: CalibrationSettings = CalibrationSettings(),
+    on_progress: Callable[[Progress], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> CalibrationResult:
+    """Maximise the MI of all ``scenes`` together, starting from ``seed``.
+
+    ``scenes`` may be a prepared :class:`SceneStack` (then ``camera`` is ignored), which is how
+    callers that evaluate MI themselves avoid stacking the scenes twice.
+    """
+    t0 = time.perf_counter()
+    if isinstance(scenes, SceneStack):
+        stack = scenes
+    else:
+        if camera is None:
+            raise ValueError("camera is required when scenes are not stacked")
+        reach_m = 2 * settings.translation_bound
+        stack = SceneStack.build(scenes, camera, settings.sigma, seed, reach_m, 2 * settings.rotation_bound_deg)
+    final = stack.with_sigma(settings.sigma)
+    stages = settings.schedule()
+    scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
+    free = np.array([not settings.rotation_only] * 3 + [True] * 3)
+    if settings.translation_bound == 0:
+        free[:3] = False
+
+    history: list[tuple[int, float, int]] = []
+    count = 0
+    current = seed
+    cancelled = False
+    message = ""
+    for k, stage in enumerate(stages):
+        obj = stack.with_sigma(stage.sigma).subsample(stage.step).objective(seed, start=current)
+        tracker = _Tracker(obj, scale, free, k, len(stages), settings.max_iterations, on_progress, cancel, t0, count, history)
+        try:
+            res = _run_stage(obj, tracker, settings)
+            message = str(res.message)
+            x = tracker.full(res.x)
+            if -res.fun < tracker.best_mi:  # keep the best point seen, whatever the optimiser says
+                x = tracker.best_delta
+        except _Cancelled:
+            cancelled = True
+            x = tracker.best_delta
+            message = "cancelled"
+        count = tracker.count
+        current = obj.extrinsic(x)
+        if cancelled:
+            break
+
+    mi_seed, per_seed = final.mi(seed)
+    mi_res, per_res = final.mi(current)
+    return CalibrationResult(
+        extrinsic=current,
+        seed=seed,
+        settings=settings,
+        scene_names=list(stack.names),
+        mi_seed=mi_seed,
+        mi_result=mi_res,
+        mi_seed_per_scene=per_seed,
+        mi_result_per_scene=per_res,
+        evaluations=count,
+        seconds=time.perf_counter() - t0,
+        cancelled=cancelled,
+        history=history,
+        message=message,
+    )
+
+
+class _Tracker:
+    """Wraps the objective for scipy: scaling, fixed axes, counting, best point, progress, cancel."""
+
+    def __init__(self, obj: SmoothObjective, scale, free, stage, stages, max_it, on_progress, cancel, t0, count, history):
+        self.obj, self.scale, self.free = obj, scale, free
+        self.stage, self.stages, self.max_it = stage, stages, max_it
+        self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
+        self.count, self.history = count, history
+        self.start_count = count
+        self.fixed = obj.start.copy()
+        self.best_mi = -np.inf
+        self.best_delta = obj.start.copy()
+
+    def z0(self) -> np.ndarray:
+        return (self.obj.start / self.scale)[self.free]
+
+    def full(self, z: np.ndarray) -> np.ndarray:
+        delta = self.fixed.copy()
+        delta[self.free] = np.asarray(z) * self.scale[self.free]
+        return delta
+
+    def _record(self, delta: np.ndarray, mi: float) -> None:
+        if self.cancel is not None and self.cancel.is_set():
+            raise _Cancelled
+        self.count += 1
+        self.history.append((self.count, mi, self.stage))
+        if mi > self.best_mi:
+            self.best_mi, self.best_delta = mi, delta.copy()
+        if self.on_progress is not None:
+            done = min(1.0, (self.count - self.start_count) / (8.0 * self.max_it ** 0.5 * 3))
+            self.on_progress(
+                Progress(
+                    evaluations=self.count,
+                    stage=self.stage,
+                    stages=self.stages,
+                    mi=mi,
+                    best_mi=self.best_mi,
+                    best=self.obj.extrinsic(self.best_delta),
+                    fraction=(self.stage + done) / self.stages,
+                    elapsed=time.perf_counter() - self.t0,
+                )
+            )
+
+    def fun(self, z: np.ndarray) -> float:
+        if self.cancel is not None and self.cancel.is_set():
+            raise _Cancelled
+        delta = self.full(z)
+        mi = self.obj.value(delta)
+        self._record(delta, mi)
+        return -mi
+
+    def fun_and_grad(self, z: np.ndarray) -> tuple[float, np.ndarray]:
+        if self.cancel is not None and self.cancel.is_set():
+            raise _Cancelled
+        delta = self.full(z)
+        mi, g = self.obj.value_and_grad(delta)
+        self._record(delta, mi)
+        return -mi, -(g * self.scale)[self.free]
+
+
+def _run_stage(obj: SmoothObjective, tr: _Tracker, settings: CalibrationSettings):
+    n = int(tr.free.sum())
+    bounds = [(-1.0, 1.0)] * n
+    z0 = np.clip(tr.z0(), -1.0, 1.0)
+    method = settings.method
+    if method in GRADIENT_METHODS:
+        options = {"maxiter": settings.max_iterations}
+        if method == "SLSQP":
+            options["ftol"] = 1e-10
+        else:
+            options.update(ftol=1e-12, gtol=1e-8)
+        return minimize(tr.fun_and_grad, z0, jac=True, method=method, bounds=bounds, options=options)
+    options = {"maxiter": settings.max_iterations * n, "xtol": 1e-4, "ftol": 1e-9}
+    if method == "Nelder-Mead":
+        options = {"maxiter": settings.max_iterations * n, "xatol": 1e-4, "fatol": 1e-9}
+    return minimize(tr.fun, z0, method=method, bounds=bounds, options=options)

@@ -1,0 +1,365 @@
+"""All scenes stacked into flat arrays, and the MI objective evaluated over them.
+
+Every scene is loaded once into one set of arrays: lidar points (3, N) float32 sorted by scene,
+their intensity bins, and one zero-padded (S, H+2, W+2) stack of prepared maps. One evaluation
+is then one projection, one gather and one ``bincount`` over all points of all scenes.
+
+Two estimators live here:
+
+* :meth:`SceneStack.mi` is the paper's MI, for reporting: points that land inside the image
+  read the map at the nearest pixel, hard histogram bins, Silverman widths from the data.
+* :meth:`SceneStack.objective` is what the optimiser climbs: the same MI made differentiable
+  (bilinear map lookup, linear soft-binning of E, widths frozen for the stage) over a point set
+  fixed for the stage, so that the plug-in estimate cannot grow by pushing points off the image
+  (a point that leaves reads the zero padding). It returns the analytic gradient with respect
+  to a local correction ``(dt, dw)`` of the base extrinsic, ``R = exp(dw) R0, t = t0 + dt``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel
+from .geometry import Extrinsic, _distort, in_image, left_jacobian, project_points
+from .mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
+from .scenes import Scene
+
+#: Maps of accumulated events are clipped here (the paper); camera images keep their 0..255.
+CLIP = {"events": 127.0, "image": 255.0}
+MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
+
+
+def prepare_map(event_map: np.ndarray, sigma: float = 5.0, clip: float = 127.0) -> np.ndarray:
+    """Clip an accumulated event map to [0, clip] and Gaussian-smooth it (sigma in pixels)."""
+    m = np.clip(np.asarray(event_map, dtype=np.float32), 0.0, clip)
+    if sigma > 0:
+        m = cv2.GaussianBlur(m, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
+    return m
+
+
+@dataclass(frozen=True)
+class SceneStack:
+    """Scenes stacked for fast evaluation. Build with :meth:`build`."""
+
+    camera: CameraModel
+    names: tuple[str, ...]
+    points: np.ndarray  # (3, N) float32, lidar frame, sorted by scene
+    l_bins: np.ndarray  # (N,) int32, lidar intensity 0..255
+    scene_of: np.ndarray  # (N,) int32, index of each point's scene
+    bounds: np.ndarray  # (S+1,) start of each scene's points
+    maps: np.ndarray  # (S, H+2, W+2) float32, prepared maps with a one-pixel zero border
+    map_kinds: tuple[str, ...]
+    raw_maps: tuple[np.ndarray, ...]  # the unprepared maps, for re-smoothing
+    sigma: float
+
+    # --- construction ------------------------------------------------------------------
+    @classmethod
+    def build(
+        cls,
+        scenes: Sequence[Scene],
+        camera: CameraModel,
+        sigma: float = 5.0,
+        reference: Extrinsic | None = None,
+        reach_m: float = 0.5,
+        reach_deg: float = 20.0,
+    ) -> "SceneStack":
+        """Stack ``scenes``; with a ``reference`` extrinsic, drop points that cannot reach the
+        image for any extrinsic within ``reach_m`` / ``reach_deg`` of it (an over-estimate)."""
+        if not scenes:
+            raise ValueError("no scenes to stack")
+        pts, bins, owner = [], [], []
+        for i, sc in enumerate(scenes):
+            if sc.event_map.shape != (camera.height, camera.width):
+                raise ValueError(
+                    f"scene {sc.name}: map is {sc.event_map.shape[1]}x{sc.event_map.shape[0]}, "
+                    f"camera expects {camera.width}x{camera.height}"
+                )
+            p = np.asarray(sc.points, dtype=np.float32)
+            keep = _reachable(p, camera, reference, reach_m, reach_deg) if reference is not None else slice(None)
+            pts.append(p[keep])
+            bins.append(np.clip(np.rint(sc.intensity[keep]), 0, N_BINS - 1).astype(np.int32))
+            owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
+        counts = np.array([len(b) for b in bins])
+        raw = tuple(np.asarray(sc.event_map, dtype=np.float32) for sc in scenes)
+        kinds = tuple(sc.map_kind for sc in scenes)
+        return cls(
+            camera=camera,
+            names=tuple(sc.name for sc in scenes),
+            points=np.ascontiguousarray(np.concatenate(pts).T),
+            l_bins=np.concatenate(bins),
+            scene_of=np.concatenate(owner),
+            bounds=np.concatenate([[0], np.cumsum(counts)]),
+            maps=_stack_maps(raw, kinds, sigma),
+            map_kinds=kinds,
+            raw_maps=raw,
+            sigma=float(sigma),
+        )
+
+    def with_sigma(self, sigma: float) -> "SceneStack":
+        """The same points over maps smoothed with another sigma."""
+        if sigma == self.sigma:
+            return self
+        return replace(self, maps=_stack_maps(self.raw_maps, self.map_kinds, sigma), sigma=float(sigma))
+
+    def select(self, mask: np.ndarray) -> "SceneStack":
+        """Keep the points where ``mask`` is true (the maps are shared, not copied)."""
+        mask = np.asarray(mask, dtype=bool)
+        scene_of = self.scene_of[mask]
+        counts = np.bincount(scene_of, minlength=self.n_scenes)
+        return replace(
+            self,
+            points=np.ascontiguousarray(self.points[:, mask]),
+            l_bins=self.l_bins[mask],
+            scene_of=scene_of,
+            bounds=np.concatenate([[0], np.cumsum(counts)]),
+        )
+
+    def subsample(self, step: int) -> "SceneStack":
+        """Every ``step``-th point (scan order, so the sample stays spatially even)."""
+        if step <= 1:
+            return self
+        mask = np.zeros(self.n_points, dtype=bool)
+        mask[::step] = True
+        return self.select(mask)
+
+    @property
+    def n_scenes(self) -> int:
+        return len(self.names)
+
+    @property
+    def n_points(self) -> int:
+        return self.points.shape[1]
+
+    # --- projection and the paper's MI -------------------------------------------------------
+    def project(self, extrinsic: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (N, 2) of every point and the mask of those inside the image."""
+        pc = _transform(self.points, extrinsic.R, extrinsic.translation)
+        uv, front = project_points(pc.T, self.camera)
+        return uv, front & (pc[2] > MIN_DEPTH) & in_image(uv, self.camera)
+
+    def joint_histograms(self, extrinsic: Extrinsic) -> np.ndarray:
+        """(S, 256, 256) joint (L, E) counts per scene, nearest-pixel lookup, in-image points."""
+        uv, inside = self.project(extrinsic)
+        S, Hp, Wp = self.maps.shape
+        ui = np.rint(uv[inside, 0]).astype(np.int64) + 1
+        vi = np.rint(uv[inside, 1]).astype(np.int64) + 1
+        s = self.scene_of[inside].astype(np.int64)
+        e = self.maps.reshape(-1)[(s * Hp + vi) * Wp + ui]
+        e_bins = np.clip(np.rint(e), 0, N_BINS - 1).astype(np.int64)
+        flat = (s * N_BINS + self.l_bins[inside]) * N_BINS + e_bins
+        counts = np.bincount(flat, minlength=S * N_BINS * N_BINS)
+        return counts.reshape(S, N_BINS, N_BINS).astype(np.float64)
+
+    def mi(self, extrinsic: Extrinsic, per_scene: bool = True) -> tuple[float, np.ndarray]:
+        """The paper's MI at ``extrinsic``: (all scenes pooled, per scene)."""
+        joints = self.joint_histograms(extrinsic)
+        total = mi_from_joint_histogram(joints.sum(axis=0))
+        if not per_scene:
+            return total, np.full(self.n_scenes, np.nan)
+        return total, np.array([mi_from_joint_histogram(j) for j in joints])
+
+    def in_image_fraction(self, extrinsic: Extrinsic) -> np.ndarray:
+        """Per scene, the fraction of stacked points that land inside the image."""
+        _, inside = self.project(extrinsic)
+        n_in = np.bincount(self.scene_of[inside], minlength=self.n_scenes)
+        return n_in / np.maximum(np.diff(self.bounds), 1)
+
+    # --- the optimiser's objective -------------------------------------------------------
+    def objective(self, base: Extrinsic, start: Extrinsic | None = None) -> "SmoothObjective":
+        """The differentiable MI as a function of a correction of ``base``, over the points
+        that land in the image at ``start`` (default: ``base``)."""
+        start = base if start is None else start
+        _, inside = self.project(start)
+        return SmoothObjective(self.select(inside), base, start)
+
+
+class SmoothObjective:
+    """Differentiable MI of a fixed point set as a function of a local correction ``delta``.
+
+    ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
+    The Silverman widths are fixed when the objective is made (at ``start``) so that the
+    value and the gradient describe one and the same smooth function.
+    """
+
+    def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
+        if stack.n_points == 0:
+            raise ValueError("no lidar point lands in the image at the starting extrinsic")
+        self.stack = stack
+        self.base = base
+        dt, dw = base.delta_to(base if start is None else start)
+        self.start = np.concatenate([dt, dw])  # ``start`` as a correction of ``base``
+        self._R0 = base.R
+        cam = stack.camera
+        self._wp = stack.maps.shape[2]
+        self._hp = stack.maps.shape[1]
+        self._flat_maps = stack.maps.reshape(-1)
+        self._scene_base = stack.scene_of.astype(np.int64) * (self._hp * self._wp)
+        self._l_offset = stack.l_bins.astype(np.int64) * N_BINS
+        self._e_max = CLIP["image"] - 1e-3
+        self._K = cam.K.astype(np.float32)
+        self.n = float(stack.n_points)
+        hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
+        self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
+        joint = self._soft_histogram(self._sample(self.start, jacobian=False)[0])
+        self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
+        self._A_l = kernel_matrix(self.h_l)
+        self._A_e = kernel_matrix(self.h_e)
+        p_l = self._A_l @ (hist_l / self.n)
+        self._H_l = entropy(p_l)
+        self.evaluations = 0
+
+    def extrinsic(self, delta: np.ndarray) -> Extrinsic:
+        return self.base.perturbed(delta[:3], delta[3:])
+
+    def value(self, delta: np.ndarray) -> float:
+        """MI (nats) at ``base`` corrected by ``delta``."""
+        e, _ = self._sample(delta, jacobian=False)
+        self.evaluations += 1
+        return self._mi_and_weights(self._soft_histogram(e), need_weights=False)[0]
+
+    def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
+        """MI and its gradient with respect to ``delta``."""
+        delta = np.asarray(delta, dtype=np.float64)
+        e, aux = self._sample(delta, jacobian=True)
+        self.evaluations += 1
+        mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
+        # d MI / d e_i: the soft bin moves weight from bin b to b + 1 as e grows
+        b = np.minimum(e, self._e_max).astype(np.int64)
+        j = self._l_offset + b
+        dmi_de = (W[j + 1] - W[j]).astype(np.float32)
+        de_du, de_dv, J, Q = aux
+        gu = dmi_de * de_du
+        gv = dmi_de * de_dv
+        gX = gu * J[0] + gv * J[3]
+        gY = gu * J[1] + gv * J[4]
+        gZ = gu * J[2] + gv * J[5]
+        grad_t = np.array([gX.sum(dtype=np.float64), gY.sum(dtype=np.float64), gZ.sum(dtype=np.float64)])
+        qxg = np.array(
+            [
+                np.dot(Q[1], gZ) - np.dot(Q[2], gY),
+                np.dot(Q[2], gX) - np.dot(Q[0], gZ),
+                np.dot(Q[0], gY) - np.dot(Q[1], gX),
+            ],
+            dtype=np.float64,
+        )
+        grad_w = left_jacobian(delta[3:]).T @ qxg
+        return mi, np.concatenate([grad_t, grad_w])
+
+    # --- internals -----------------------------------------------------------------------
+    def _sample(self, delta: np.ndarray, jacobian: bool):
+        """Bilinear map values at the projected points (and what the gradient needs)."""
+        delta = np.asarray(delta, dtype=np.float64)
+        ext = self.extrinsic(delta)
+        Q = (ext.R.astype(np.float32) @ self.stack.points)  # rotated points (3, N)
+        t = ext.translation.astype(np.float32)
+        X, Y, Z = Q[0] + t[0], Q[1] + t[1], Q[2] + t[2]
+        front = Z > MIN_DEPTH
+        inv_z = 1.0 / np.maximum(Z, MIN_DEPTH)
+        x = X * inv_z
+        y = Y * inv_z
+        cam = self.stack.camera
+        xd, yd, Jd = _distort(x, y, cam, jacobian)
+        K = self._K
+        # padded-map coordinates: pixel (0, 0) of the map is (1, 1) of the padded map
+        u = K[0, 0] * xd + K[0, 1] * yd + (K[0, 2] + 1.0)
+        v = K[1, 1] * yd + (K[1, 2] + 1.0)
+        u_max = np.float32(self._wp - 1 - 1e-3)
+        v_max = np.float32(self._hp - 1 - 1e-3)
+        uc = np.clip(u, 0.0, u_max)
+        vc = np.clip(v, 0.0, v_max)
+        uc[~front] = 0.0
+        vc[~front] = 0.0
+        ui = uc.astype(np.int64)
+        vi = vc.astype(np.int64)
+        fu = uc - ui
+        fv = vc - vi
+        idx = self._scene_base + vi * self._wp + ui
+        m = self._flat_maps
+        m00 = m[idx]
+        m01 = m[idx + 1]
+        m10 = m[idx + self._wp]
+        m11 = m[idx + self._wp + 1]
+        top = m00 + fu * (m01 - m00)
+        bot = m10 + fu * (m11 - m10)
+        e = top + fv * (bot - top)
+        if not jacobian:
+            return e, None
+        inside_u = (u > 0.0) & (u < u_max) & front
+        inside_v = (v > 0.0) & (v < v_max) & front
+        de_du = np.where(inside_u, (m01 - m00) + fv * ((m11 - m10) - (m01 - m00)), 0.0).astype(np.float32)
+        de_dv = np.where(inside_v, bot - top, 0.0).astype(np.float32)
+        dxd_dx, dxd_dy, dyd_dx, dyd_dy = Jd
+        fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
+        du_dx = fx * dxd_dx + s * dyd_dx
+        du_dy = fx * dxd_dy + s * dyd_dy
+        dv_dx = fy * dyd_dx
+        dv_dy = fy * dyd_dy
+        # d(u, v)/d(X, Y, Z) as six arrays (row-major 2x3)
+        J = (
+            du_dx * inv_z,
+            du_dy * inv_z,
+            -(du_dx * x + du_dy * y) * inv_z,
+            dv_dx * inv_z,
+            dv_dy * inv_z,
+            -(dv_dx * x + dv_dy * y) * inv_z,
+        )
+        return e, (de_du, de_dv, J, Q)
+
+    def _soft_histogram(self, e: np.ndarray) -> np.ndarray:
+        """(256, 256) joint histogram with E linearly split between its two nearest bins."""
+        e = np.minimum(e, self._e_max)
+        b = e.astype(np.int64)
+        frac = e - b
+        j = self._l_offset + b
+        size = N_BINS * N_BINS
+        h = np.bincount(j, weights=1.0 - frac, minlength=size)
+        h += np.bincount(j + 1, weights=frac, minlength=size)[:size]
+        return h.reshape(N_BINS, N_BINS)
+
+    def _mi_and_weights(self, joint: np.ndarray, need_weights: bool):
+        n = self.n
+        A_l, A_e = self._A_l, self._A_e
+        p_le = A_l @ (joint / n) @ A_e.T
+        p_e = A_e @ (joint.sum(axis=0) / n)
+        mi = self._H_l + entropy(p_e) - entropy(p_le)
+        if not need_weights:
+            return mi, None
+        tiny = 1e-300
+        g_le = -(np.log(np.maximum(p_le, tiny)) + 1.0)  # dH/dp
+        g_e = -(np.log(np.maximum(p_e, tiny)) + 1.0)
+        W = ((A_e.T @ g_e)[None, :] - A_l.T @ g_le @ A_e) / n
+        return mi, W.reshape(-1)
+
+
+def _transform(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(3, N) lidar points into the camera frame, float32."""
+    return R.astype(np.float32) @ points + t.astype(np.float32)[:, None]
+
+
+def _stack_maps(raw: Sequence[np.ndarray], kinds: Sequence[str], sigma: float) -> np.ndarray:
+    h, w = raw[0].shape
+    out = np.zeros((len(raw), h + 2, w + 2), dtype=np.float32)
+    for i, (m, kind) in enumerate(zip(raw, kinds)):
+        out[i, 1:-1, 1:-1] = prepare_map(m, sigma, CLIP[kind])
+    return out
+
+
+def _reachable(points: np.ndarray, camera: CameraModel, ref: Extrinsic, reach_m: float, reach_deg: float) -> np.ndarray:
+    """Points that may project into the image for some extrinsic near ``ref`` (a superset)."""
+    pc = ref.transform(points)
+    z = pc[:, 2]
+    rng = np.linalg.norm(pc, axis=1)
+    # widen the field of view by the rotation reach plus the angle the translation reach subtends
+    slack = np.radians(reach_deg) + np.arcsin(np.clip(reach_m / np.maximum(rng, 1e-6), 0.0, 1.0))
+    half_w = np.arctan2(max(camera.K[0, 2], camera.width - camera.K[0, 2]), camera.K[0, 0])
+    half_h = np.arctan2(max(camera.K[1, 2], camera.height - camera.K[1, 2]), camera.K[1, 1])
+    if camera.model == "equidistant" or camera.is_distorted:
+        half_w, half_h = half_w * 1.3, half_h * 1.3  # distortion can widen the view
+    ang_x = np.abs(np.arctan2(pc[:, 0], z))
+    ang_y = np.abs(np.arctan2(pc[:, 1], z))
+    ok = np.isfinite(pc).all(axis=1) & (rng > MIN_DEPTH)
+    return ok & (ang_x <= half_w + slack) & (ang_y <= half_h + slack)

@@ -1,0 +1,222 @@
+"""Scene folders: discovery, pairing and loading.
+
+Layout (the reference code's, extended to every format :mod:`l2e_studio.io` reads)::
+
+    DIR/event/<stem>.png|.raw|.h5|...   accumulated event map, raw events, or a camera image
+    DIR/lidar/<stem>.txt|.pcd|.bin|...  lidar scan
+    DIR/camera.yaml                     intrinsics + seed (ours), or
+    DIR/config/config.json              intrinsics + seed (the reference format, key "cam")
+
+Maps and scans are paired by file stem. Files without a partner are reported in
+``SceneSet.unpaired``; a scene whose files cannot be read becomes a :class:`SceneFailure`
+while the others load. Parsed scans are cached in ``DIR/.l2e_cache`` (keyed by file size and
+modification time) so the second load of a large folder is fast.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .camera import CameraModel
+from .errors import InputError
+from .geometry import Extrinsic
+
+MAP_DIRS = ("event", "events", "image", "images")
+LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
+RIG_FILES = ("camera.yaml", "camera.yml", "config/config.json", "config.json")
+CACHE_DIR = ".l2e_cache"
+
+
+@dataclass
+class Scene:
+    """One static scene: a lidar scan and the event map (or image) seen at the same time."""
+
+    name: str
+    points: np.ndarray  # (N, 3) float32, lidar frame
+    intensity: np.ndarray  # (N,) float32, 0..255
+    event_map: np.ndarray  # (H, W) float32, raw counts or grey image, unclipped, unsmoothed
+    map_kind: str = "events"  # "events" | "image"
+    lidar_path: Path | None = None
+    map_path: Path | None = None
+
+
+@dataclass
+class SceneFailure:
+    """A scene that could not be loaded, and why (one line naming the file)."""
+
+    name: str
+    error: str
+
+
+@dataclass
+class SceneSet:
+    """What a scene folder holds: the camera, the seed, and the scenes that loaded."""
+
+    root: Path
+    camera: CameraModel
+    seed: Extrinsic
+    scenes: list[Scene]
+    failures: list[SceneFailure] = field(default_factory=list)
+    unpaired: list[str] = field(default_factory=list)
+    seed_source: str = ""
+    camera_source: str = ""
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.scenes]
+
+
+def find_scene_files(folder: Path) -> tuple[dict[str, tuple[Path, Path]], list[str]]:
+    """Pair map files with lidar files by stem: ``({stem: (map, lidar)}, unpaired messages)``."""
+    from .io.lidar import LIDAR_SUFFIXES
+    from .io.maps import MAP_SUFFIXES
+
+    maps = _by_stem(_first_dir(folder, MAP_DIRS), MAP_SUFFIXES + _event_suffixes())
+    scans = _by_stem(_first_dir(folder, LIDAR_DIRS), LIDAR_SUFFIXES)
+    pairs = {stem: (maps[stem], scans[stem]) for stem in sorted(maps.keys() & scans.keys())}
+    unpaired = [f"{maps[s]}: no lidar scan with stem {s!r}" for s in sorted(maps.keys() - scans.keys())]
+    unpaired += [f"{scans[s]}: no event map with stem {s!r}" for s in sorted(scans.keys() - maps.keys())]
+    return pairs, unpaired
+
+
+def load_scene_folder(
+    folder: str | Path,
+    seed_file: str | Path | None = None,
+    camera_file: str | Path | None = None,
+    on_scene: Callable[[int, int, str], None] | None = None,
+    use_cache: bool = True,
+) -> SceneSet:
+    """Load every scene of ``folder``.
+
+    Raises :class:`InputError` when the folder, the camera or the seed cannot be used or when
+    no scene loads; a single bad scene is recorded in ``failures`` instead.
+    ``on_scene(i, n, name)`` is called before each scene is read (for progress bars).
+    """
+    from .io.cameras import load_rig, load_seed
+
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError(root, "scene folder does not exist" if not root.exists() else "not a folder")
+    pairs, unpaired = find_scene_files(root)
+    if not pairs:
+        raise InputError(root, f"no scene found: expected {'|'.join(MAP_DIRS)}/<stem>.<map> paired with "
+                               f"{'|'.join(LIDAR_DIRS)}/<stem>.<scan>")
+    rig_path = Path(camera_file) if camera_file else _find_rig(root)
+    rig = load_rig(rig_path)
+    if seed_file is not None:
+        seed, seed_source = load_seed(seed_file), str(seed_file)
+    elif rig.seed is not None:
+        seed, seed_source = rig.seed, str(rig_path)
+    else:
+        raise InputError(rig_path, "holds no seed extrinsic; pass one with --seed FILE")
+
+    camera: CameraModel | None = rig.camera() if rig.width and rig.height else None
+    scenes: list[Scene] = []
+    failures: list[SceneFailure] = []
+    for i, (stem, (map_path, lidar_path)) in enumerate(pairs.items()):
+        if on_scene:
+            on_scene(i, len(pairs), stem)
+        try:
+            scene = load_scene(stem, map_path, lidar_path, camera, root if use_cache else None)
+            if camera is None:
+                h, w = scene.event_map.shape
+                camera = rig.camera(w, h)
+            scenes.append(scene)
+        except InputError as exc:
+            failures.append(SceneFailure(stem, str(exc)))
+    if not scenes:
+        details = "; ".join(f.error for f in failures[:3])
+        raise InputError(root, f"none of the {len(pairs)} scenes loaded ({details})")
+    assert camera is not None
+    return SceneSet(root, camera, seed, scenes, failures, unpaired, seed_source, str(rig_path))
+
+
+def load_scene(
+    name: str, map_path: Path, lidar_path: Path, camera: CameraModel | None, cache_root: Path | None = None
+) -> Scene:
+    """Read one scene; checks the map size against ``camera`` when it is known."""
+    from .io.maps import load_map
+
+    w, h = (camera.width, camera.height) if camera else (None, None)
+    event_map, kind = load_map(map_path, width=w, height=h)
+    points, intensity = _load_scan_cached(lidar_path, cache_root)
+    return Scene(name, points, intensity, event_map, kind, lidar_path, map_path)
+
+
+# --- internals ------------------------------------------------------------------------------
+
+
+def _event_suffixes() -> tuple[str, ...]:
+    try:
+        from .io.events import EVENT_SUFFIXES
+    except ImportError:  # raw event decoding not available
+        return ()
+    return tuple(EVENT_SUFFIXES)
+
+
+def _first_dir(root: Path, names: tuple[str, ...]) -> Path | None:
+    for name in names:
+        if (root / name).is_dir():
+            return root / name
+    return None
+
+
+def _by_stem(folder: Path | None, suffixes: tuple[str, ...]) -> dict[str, Path]:
+    if folder is None:
+        return {}
+    ordered = sorted(suffixes, key=len, reverse=True)  # ".pcd.bin" before ".bin"
+    out: dict[str, Path] = {}
+    for path in sorted(folder.iterdir()):
+        if not path.is_file() or path.name.startswith("."):
+            continue
+        lower = path.name.lower()
+        for suffix in ordered:
+            if lower.endswith(suffix) and len(lower) > len(suffix):
+                out.setdefault(path.name[: -len(suffix)], path)
+                break
+    return out
+
+
+def _find_rig(root: Path) -> Path:
+    for rel in RIG_FILES:
+        if (root / rel).is_file():
+            return root / rel
+    raise InputError(root, f"no camera file: expected one of {', '.join(RIG_FILES)} (or pass --camera FILE)")
+
+
+def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, np.ndarray]:
+    from .io.lidar import load_lidar
+
+    cache_file = None
+    if cache_root is not None:
+        st = path.stat()
+        key = hashlib.sha1(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
+        cache_file = cache_root / CACHE_DIR / f"{path.name}.{key}.npy"
+        if cache_file.is_file():
+            try:
+                arr = np.load(cache_file)
+                return np.ascontiguousarray(arr[:, :3]), np.ascontiguousarray(arr[:, 3])
+            except (OSError, ValueError):
+                pass  # a damaged cache entry is rebuilt below
+    scan = load_lidar(path)
+    if cache_file is not None:
+        _write_cache(cache_file, np.column_stack([scan.points, scan.intensity]).astype(np.float32))
+    return scan.points, scan.intensity
+
+
+def _write_cache(cache_file: Path, arr: np.ndarray) -> None:
+    """Best effort: a read-only scene folder simply goes uncached."""
+    try:
+        cache_file.parent.mkdir(exist_ok=True)
+        for old in cache_file.parent.glob(cache_file.name.rsplit(".", 2)[0] + ".*.npy"):
+            old.unlink(missing_ok=True)
+        tmp = cache_file.with_suffix(".tmp.npy")
+        np.save(tmp, arr)
+        tmp.replace(cache_file)
+    except OSError:
+        pass
