@@ -1,0 +1,132 @@
+"""``l2e-studio calibrate``: calibrate a folder of scenes end to end, headless."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from ..calibrate import METHODS, CalibrationSettings, calibrate
+from ..errors import InputError
+from ..export import write_result
+from ..geometry import Extrinsic
+from ..objective import SceneStack
+from ..samples import sample_scenes_dir
+from ..scenes import load_scene_folder
+
+NAME = "calibrate"
+HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder by MI maximisation (headless)."
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenes", type=Path, help="scene folder (default: the embedded sample)")
+    p.add_argument("--seed", type=Path, help="seed extrinsic file (overrides the folder's)")
+    p.add_argument("--camera", type=Path, help="camera file (default: DIR/camera.yaml or DIR/config/config.json)")
+    p.add_argument("--out", type=Path, default=Path("l2e_result.yaml"),
+                   help="result file, YAML or .json (default: ./l2e_result.yaml; an existing file is kept as a backup)")
+    p.add_argument("--method", choices=METHODS, default="SLSQP", help="optimiser (default: SLSQP)")
+    p.add_argument("--bound-m", type=float, default=CalibrationSettings.translation_bound,
+                   help="translation bound per axis around the seed, metres (default: %(default)s)")
+    p.add_argument("--bound-deg", type=float, default=CalibrationSettings.rotation_bound_deg,
+                   help="rotation bound per axis around the seed, degrees (default: %(default)s)")
+    p.add_argument("--sigma", type=float, default=CalibrationSettings.sigma,
+                   help="event-map smoothing of the final stage, pixels (default: %(default)s)")
+    p.add_argument("--rotation-only", action="store_true", help="keep the seed's translation, optimise rotation")
+    p.add_argument("--single-stage", action="store_true", help="no coarse-to-fine schedule")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def run(args: argparse.Namespace) -> int:
+    err = Console(stderr=True)
+    t_start = time.perf_counter()
+    settings = _settings(args)
+    folder = args.scenes or sample_scenes_dir()
+    for path, what in ((args.seed, "seed file"), (args.camera, "camera file")):
+        if path is not None and not path.is_file():
+            raise InputError(path, f"{what} does not exist")
+
+    with _progress(args.quiet, err) as prog:
+        task = prog.add_task("loading scenes", total=None)
+        scene_set = load_scene_folder(
+            folder, args.seed, args.camera, on_scene=lambda i, n, name: prog.update(task, completed=i, total=n, description=f"loading {name}")
+        )
+        prog.update(task, completed=prog.tasks[0].total or 1, description=f"loaded {len(scene_set.scenes)} scenes")
+    for msg in scene_set.unpaired:
+        err.print(f"[yellow]warning:[/] unpaired file {msg}", highlight=False)
+    for fail in scene_set.failures:
+        err.print(f"[yellow]warning:[/] skipped scene {fail.name}: {fail.error}", highlight=False)
+    t_loaded = time.perf_counter()
+
+    seed = scene_set.seed
+    stack = SceneStack.build(scene_set.scenes, scene_set.camera, settings.sigma, seed,
+                             2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+    with _progress(args.quiet, err) as prog:
+        task = prog.add_task("optimising", total=1.0)
+
+        def on_progress(p) -> None:
+            prog.update(task, completed=p.fraction,
+                        description=f"stage {p.stage + 1}/{p.stages}  eval {p.evaluations:4d}  MI {p.best_mi:.5f}")
+
+        result = calibrate(stack, None, seed, settings, on_progress=on_progress)
+        prog.update(task, completed=1.0)
+
+    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root)
+    console = Console()
+    if not args.quiet:
+        console.print(_summary(result, scene_set.seed))
+    console.print(f"result written to {out}" + (f" (previous file kept as {backup})" if backup else ""), highlight=False)
+    console.print(
+        f"{len(scene_set.scenes)} scenes, {stack.n_points} points; load {t_loaded - t_start:.2f} s, "
+        f"optimisation {result.seconds:.2f} s ({result.evaluations} evaluations), total {time.perf_counter() - t_start:.2f} s",
+        highlight=False,
+    )
+    return 0
+
+
+def _settings(args: argparse.Namespace) -> CalibrationSettings:
+    try:
+        return CalibrationSettings(
+            method=args.method,
+            translation_bound=args.bound_m,
+            rotation_bound_deg=args.bound_deg,
+            sigma=args.sigma,
+            rotation_only=args.rotation_only,
+            coarse_to_fine=not args.single_stage,
+        )
+    except ValueError as exc:
+        raise InputError(None, str(exc)) from None
+
+
+def _progress(quiet: bool, console: Console) -> Progress:
+    return Progress(
+        TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
+        console=console, disable=quiet or not console.is_terminal, transient=False,
+    )
+
+
+def _summary(result, seed: Extrinsic) -> Table:
+    table = Table(title="L2E calibration", show_lines=False)
+    table.add_column("scene")
+    table.add_column("MI at seed", justify="right")
+    table.add_column("MI at result", justify="right")
+    table.add_column("change", justify="right")
+    for name, a, b in zip(result.scene_names, result.mi_seed_per_scene, result.mi_result_per_scene):
+        table.add_row(name, f"{a:.4f}", f"{b:.4f}", f"{b - a:+.4f}")
+    table.add_row("[b]all scenes[/]", f"[b]{result.mi_seed:.4f}[/]", f"[b]{result.mi_result:.4f}[/]",
+                  f"[b]{result.mi_result - result.mi_seed:+.4f}[/]", end_section=True)
+    ext = result.extrinsic
+    dr, dt = seed.error_to(ext)
+    table.caption = (
+        f"t = [{', '.join(f'{v:.4f}' for v in ext.translation)}] m   "
+        f"rpy = [{', '.join(f'{v:.3f}' for v in ext.rpy())}] deg   "
+        f"moved {dr:.3f} deg / {100 * dt:.2f} cm from the seed"
+        + ("   (cancelled)" if result.cancelled else "")
+    )
+    return table
+
+

@@ -1,0 +1,152 @@
+"""Result files: the calibration as YAML or JSON, written atomically, never overwritten silently.
+
+A result file holds ``T_cam_lidar`` (4x4, maps lidar-frame points into the camera frame), its
+inverse ``T_lidar_cam``, the same transform as translation / rotation vector / quaternion (xyzw) /
+roll-pitch-yaw, the seed, the bounds and optimiser settings, the MI at the seed and at the result
+(all scenes pooled and per scene), the evaluation count, the optimisation wall time and the scene
+list. :func:`l2e_studio.io.cameras.load_seed` reads it back as a seed.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from . import __version__
+from .calibrate import CalibrationResult
+from .camera import CameraModel
+from .geometry import Extrinsic
+
+
+def extrinsic_to_dict(ext: Extrinsic) -> dict:
+    """Every representation of ``T_cam_lidar`` users ask for."""
+    return {
+        "T_cam_lidar": _round(ext.matrix),
+        "T_lidar_cam": _round(ext.inverse().matrix),
+        "translation": _round(ext.translation),
+        "rotvec": _round(ext.rotvec),
+        "quaternion_xyzw": _round(ext.quaternion_xyzw),
+        "rpy_deg": _round(ext.rpy(degrees=True)),
+    }
+
+
+def result_to_dict(result: CalibrationResult, camera: CameraModel | None = None, scenes_dir: str | Path | None = None) -> dict:
+    """The result file's content as plain Python types."""
+    ext = result.extrinsic
+    s = result.settings
+    out = {
+        "l2e_studio_version": __version__,
+        "created": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        **extrinsic_to_dict(ext),
+        "ros_static_transform": (
+            "static_transform_publisher "
+            + " ".join(f"{v:.6f}" for v in [*ext.translation, *ext.quaternion_xyzw])
+            + " camera lidar"
+        ),
+        "seed": extrinsic_to_dict(result.seed),
+        "bounds": {"translation_m": s.translation_bound, "rotation_deg": s.rotation_bound_deg},
+        "optimiser": {
+            "method": s.method,
+            "sigma_px": s.sigma,
+            "rotation_only": s.rotation_only,
+            "max_iterations": s.max_iterations,
+            "stages": [asdict(st) for st in s.schedule()],
+            "message": result.message,
+            "cancelled": result.cancelled,
+        },
+        "mi": {
+            "seed": float(result.mi_seed),
+            "result": float(result.mi_result),
+            "per_scene": [
+                {"scene": n, "seed": _f(a), "result": _f(b)}
+                for n, a, b in zip(result.scene_names, result.mi_seed_per_scene, result.mi_result_per_scene)
+            ],
+        },
+        "evaluations": int(result.evaluations),
+        "optimisation_seconds": round(float(result.seconds), 4),
+        "scenes": list(result.scene_names),
+    }
+    if scenes_dir is not None:
+        out["scenes_dir"] = str(scenes_dir)
+    if camera is not None:
+        out["camera"] = {
+            "model": camera.model,
+            "width": camera.width,
+            "height": camera.height,
+            "K": _round(camera.K),
+            "D": _round(camera.D),
+        }
+    return out
+
+
+def dumps(data: dict, path: str | Path) -> bytes:
+    """Serialise as JSON when ``path`` ends in .json, YAML otherwise."""
+    if str(path).lower().endswith(".json"):
+        return (json.dumps(data, indent=2) + "\n").encode()
+    return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120).encode()
+
+
+def write_result(
+    path: str | Path, result: CalibrationResult, camera: CameraModel | None = None, scenes_dir: str | Path | None = None
+) -> tuple[Path, Path | None]:
+    """Write the result file atomically. Returns ``(path, backup)``: an existing file at
+    ``path`` is first renamed to a timestamped backup, never overwritten."""
+    path = Path(path)
+    data = dumps(result_to_dict(result, camera, scenes_dir), path)
+    return path, atomic_write_bytes(path, data, keep_existing=True)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes, keep_existing: bool = True) -> Path | None:
+    """Write ``data`` to ``path`` so that readers see the old file or the new one, never a part.
+
+    With ``keep_existing`` an existing file is moved aside to ``<stem>.<timestamp>.bak<suffix>``
+    (returned); otherwise it is replaced.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    backup = None
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if keep_existing and path.exists():
+            backup = backup_name(path)
+            try:
+                os.link(path, backup)  # the old content stays reachable under the backup name
+            except OSError:  # no hard links on this file system
+                shutil.copy2(path, backup)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return backup
+
+
+def backup_name(path: Path) -> Path:
+    """A free ``<stem>.<YYYYmmdd-HHMMSS>[-n].bak<suffix>`` next to ``path``."""
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    suffix = "".join(path.suffixes) or ""
+    stem = path.name[: len(path.name) - len(suffix)] if suffix else path.name
+    for i in range(1000):
+        candidate = path.with_name(f"{stem}.{stamp}{'-' + str(i) if i else ''}.bak{suffix}")
+        if not candidate.exists():
+            return candidate
+    raise FileExistsError(f"no free backup name for {path}")
+
+
+def _round(a) -> list:
+    return np.round(np.asarray(a, dtype=np.float64), 10).tolist()
+
+
+def _f(x: float) -> float | None:
+    return None if not np.isfinite(x) else float(x)
