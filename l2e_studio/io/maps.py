@@ -1,0 +1,165 @@
+"""The 2D map a scene's lidar is scored against: an accumulated event map or a camera frame.
+
+:func:`load_map` returns a float32 (H, W) array and its kind:
+
+* ``"events"`` -- an accumulated event map: raw per-pixel counts (the reference code's uint8
+  PNGs, our own 8/16-bit PNG/TIFF maps, a 2D ``.npy``), or a raw event recording (any
+  :data:`~l2e_studio.io.events.EVENT_SUFFIXES` file) accumulated on the fly per the paper
+  (count events per pixel over a window, clip to [0, 127]) and cached next to the file as
+  ``<file>.l2ecache.npz`` (or in the user cache dir when that folder is read-only);
+* ``"image"`` -- a camera frame, converted to grey (the MI method came from lidar-to-camera
+  calibration, so an ordinary camera works the same way).
+
+How the kind is decided when ``kind`` is not given: raw event files are ``"events"``; JPEGs
+and colour images (3 or 4 channels) are ``"image"``; a single-channel image is ``"events"``
+when its file name or one of its two parent folders contains "event" (the reference layout
+``DIR/event/<stem>.png``), ``"image"`` otherwise. Values are returned unclipped and
+unsmoothed: :func:`l2e_studio.mi.prepare_map` does that.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+
+#: Image suffixes read as maps. Raw event suffixes (``EVENT_SUFFIXES``) are accepted as well.
+IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".exr")
+MAP_KINDS = ("events", "image")
+
+
+def _event_suffixes() -> tuple[str, ...]:
+    from .events import EVENT_SUFFIXES
+
+    return EVENT_SUFFIXES
+
+
+#: Every suffix :func:`load_map` reads: images first, then raw event recordings.
+MAP_SUFFIXES: tuple[str, ...] = IMAGE_SUFFIXES + tuple(s for s in _event_suffixes() if s not in IMAGE_SUFFIXES)
+
+
+def map_suffix(path: str | Path) -> str | None:
+    """The entry of :data:`MAP_SUFFIXES` that ``path`` ends with (longest match), or None."""
+    name = Path(path).name.lower()
+    matches = [s for s in MAP_SUFFIXES if name.endswith(s)]
+    return max(matches, key=len) if matches else None
+
+
+def guess_kind(path: str | Path, channels: int = 1) -> str:
+    """The map kind of a file by the rules in the module docstring."""
+    path = Path(path)
+    suffix = map_suffix(path)
+    if suffix is not None and suffix not in IMAGE_SUFFIXES and suffix != ".npy":
+        return "events"
+    if suffix in (".jpg", ".jpeg") or channels >= 3:
+        return "image"
+    names = [path.name, path.parent.name, path.parent.parent.name]
+    return "events" if any("event" in n.lower() for n in names) else "image"
+
+
+def load_map(
+    path: str | Path,
+    width: int | None = None,
+    height: int | None = None,
+    kind: str | None = None,
+    window_s: float = 3.0,
+    start_s: float | None = None,
+    hot_pixel_sigma: float | None = None,
+    cache: bool = True,
+) -> tuple[np.ndarray, str]:
+    """Read a map as float32 (H, W) and its kind ("events" or "image").
+
+    ``width``/``height``, when given, are the camera's image size: a map of another size is an
+    error. For raw event files they also set the sensor size when the file does not say it.
+    ``window_s``, ``start_s`` and ``hot_pixel_sigma`` are passed to the accumulation.
+    """
+    path = Path(path)
+    if kind is not None and kind not in MAP_KINDS:
+        raise ValueError(f"kind must be one of {MAP_KINDS}, got {kind!r}")
+    suffix = map_suffix(path)
+    if suffix is None:
+        raise InputError(path, f"unknown map format; expected one of {', '.join(MAP_SUFFIXES)}")
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    if suffix in IMAGE_SUFFIXES:
+        image, channels = _read_image(path)
+    elif suffix == ".npy" and _is_plain_2d_npy(path):
+        image, channels = _read_npy_map(path), 1
+    else:
+        from .events import accumulate_events_cached
+
+        image = accumulate_events_cached(
+            path, window_s=window_s, start_s=start_s, hot_pixel_sigma=hot_pixel_sigma,
+            width=width, height=height, use_cache=cache,
+        ).astype(np.float32)
+        channels = 1
+        kind = kind or "events"
+    kind = kind or guess_kind(path, channels)
+    _check_size(path, image, width, height)
+    return image, kind
+
+
+def _read_image(path: Path) -> tuple[np.ndarray, int]:
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        raise InputError(path, "the image file is empty")
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise InputError(path, "cannot decode the image (corrupt, truncated or not an image)")
+    if image.size == 0:
+        raise InputError(path, "the image has no pixels")
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    img = image.astype(np.float32)
+    if channels == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    elif channels == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY)
+    elif channels == 2:  # grey + alpha
+        img = img[:, :, 0]
+    elif channels != 1:
+        raise InputError(path, f"image has {channels} channels; expected 1, 3 or 4")
+    if not np.all(np.isfinite(img)):
+        raise InputError(path, "image has NaN or infinite pixels")
+    return np.ascontiguousarray(img, dtype=np.float32), channels
+
+
+def _is_plain_2d_npy(path: Path) -> bool:
+    try:
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, f"cannot read .npy ({exc})") from exc
+    return arr.dtype.names is None and arr.ndim == 2 and arr.shape[1] > 8
+
+
+def _read_npy_map(path: Path) -> np.ndarray:
+    arr = np.load(path, allow_pickle=False)
+    if not np.issubdtype(arr.dtype, np.number):
+        raise InputError(path, f"map array has non-numeric dtype {arr.dtype}")
+    arr = arr.astype(np.float32)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(path, "map has NaN or infinite values")
+    return arr
+
+
+def _check_size(path: Path, image: np.ndarray, width: int | None, height: int | None) -> None:
+    h, w = image.shape[:2]
+    if (width is not None and w != int(width)) or (height is not None and h != int(height)):
+        want = f"{width if width is not None else '?'}x{height if height is not None else '?'}"
+        raise InputError(path, f"map is {w}x{h}, camera expects {want}")
+
+
+def write_map_png(path: str | Path, event_map: np.ndarray) -> Path:
+    """Write an accumulated event map as an 8-bit PNG (values clipped to [0, 255])."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img = np.clip(np.rint(np.asarray(event_map, dtype=np.float64)), 0, 255).astype(np.uint8)
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise OSError(f"cannot encode {path} as PNG")
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(buf.tobytes())
+    tmp.replace(path)
+    return path
