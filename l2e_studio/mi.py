@@ -50,9 +50,12 @@ def weighted_std(hist: np.ndarray) -> float:
     return float(np.sqrt(max(var, 0.0)))
 
 
-@lru_cache(maxsize=64)
-def _kernel_matrix_cached(h_milli: int, n: int) -> np.ndarray:
-    h = h_milli / 1000.0
+@lru_cache(maxsize=128)
+def kernel_matrix(h: float, n: int = N_BINS) -> np.ndarray:
+    """The (n, n) matrix A with ``A @ hist`` = the Gaussian-smoothed histogram (width h bins).
+
+    Columns sum to one, so smoothing preserves mass. Read-only and cached.
+    """
     A = np.zeros((n, n))
     if h <= 0:
         np.fill_diagonal(A, 1.0)
@@ -70,14 +73,6 @@ def _kernel_matrix_cached(h_milli: int, n: int) -> np.ndarray:
         np.add.at(A, (dst, src), wk)
     A.setflags(write=False)
     return A
-
-
-def kernel_matrix(h: float, n: int = N_BINS) -> np.ndarray:
-    """The (n, n) matrix A with ``A @ hist`` = the Gaussian-smoothed histogram (width h bins).
-
-    Columns sum to one, so smoothing preserves mass. Widths are cached to 1/1000 of a bin.
-    """
-    return _kernel_matrix_cached(int(round(h * 1000)), n)
 
 
 def entropy(p: np.ndarray) -> float:
@@ -101,8 +96,8 @@ def mi_from_joint_histogram(joint: np.ndarray, h_l: float | None = None, h_e: fl
         h_l = silverman_bandwidth(weighted_std(hist_l), int(round(n)))
     if h_e is None:
         h_e = silverman_bandwidth(weighted_std(hist_e), int(round(n)))
-    A_l = kernel_matrix(h_l, joint.shape[0])
-    A_e = kernel_matrix(h_e, joint.shape[1])
+    A_l = kernel_matrix(float(h_l), joint.shape[0])
+    A_e = kernel_matrix(float(h_e), joint.shape[1])
     p_le = A_l @ (joint / n) @ A_e.T
     p_l = A_l @ (hist_l / n)
     p_e = A_e @ (hist_e / n)
