@@ -234,11 +234,7 @@ def write_dataset(
     import cv2
 
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()):
-        if not overwrite:
-            raise InputError(out, "folder is not empty (pass --force to overwrite)")
+    if check_out_dir(out, overwrite):
         for sub in ("event", "lidar"):
             for old in (out / sub).glob("scene_*"):
                 old.unlink()
@@ -257,6 +253,17 @@ def write_dataset(
         if on_scene:
             on_scene(i + 1, config.n_scenes)
     return out
+
+
+def check_out_dir(out: Path, overwrite: bool = False) -> bool:
+    """Whether ``out`` already holds files; raises :class:`InputError` when it cannot be used."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")
+    busy = out.is_dir() and any(out.iterdir())
+    if busy and not overwrite:
+        raise InputError(out, "folder is not empty (pass --force to overwrite)")
+    return busy
 
 
 def write_points_txt(path: Path, points: np.ndarray, intensity: np.ndarray) -> None:
