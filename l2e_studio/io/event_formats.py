@@ -1,0 +1,298 @@
+"""Event decoders for the non-Prophesee formats: AEDAT4, HDF5, npz/npy and text.
+
+Each decoder yields ``(x, y, t_us, p)`` numpy arrays in chunks; :mod:`l2e_studio.io.events`
+wraps them. Conventions are documented there.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import InputError
+
+Arrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+_T_NAMES = ("t", "ts", "timestamp", "timestamps", "time", "t_us")
+_P_NAMES = ("p", "pol", "polarity", "on")
+
+
+def decoder(path: Path, suffix: str, chunk: int) -> Iterator[Arrays]:
+    if suffix == ".aedat4":
+        return _aedat4(path, chunk)
+    if suffix in (".h5", ".hdf5"):
+        return _hdf5(path, chunk)
+    if suffix in (".npz", ".npy"):
+        return _numpy(path, chunk)
+    if suffix == ".txt":
+        return _text(path, chunk)
+    raise InputError(path, f"no decoder for {suffix}")
+
+
+def sensor_size(path: Path, suffix: str) -> tuple[int, int] | None:
+    try:
+        if suffix == ".aedat4":
+            import aedat  # type: ignore[import-not-found]
+
+            for info in aedat.Decoder(str(path)).id_to_stream().values():
+                if info.get("type") == "events" and info.get("width"):
+                    return int(info["width"]), int(info["height"])
+            return None
+        if suffix in (".h5", ".hdf5"):
+            import h5py
+
+            with h5py.File(path, "r") as f:
+                for node in (f, f.get("events"), f.get("CD")):
+                    if node is None:
+                        continue
+                    attrs = node.attrs
+                    if "width" in attrs and "height" in attrs:
+                        return int(attrs["width"]), int(attrs["height"])
+                    if "sensor_size" in attrs:
+                        w, h = np.asarray(attrs["sensor_size"]).ravel()[:2]
+                        return int(w), int(h)
+                    if "geometry" in attrs:
+                        m = re.match(r"(\d+)x(\d+)", str(attrs["geometry"]))
+                        if m:
+                            return int(m.group(1)), int(m.group(2))
+            return None
+        if suffix == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                if "sensor_size" in z.files:
+                    w, h = z["sensor_size"].ravel()[:2]
+                    return int(w), int(h)
+                if "width" in z.files and "height" in z.files:
+                    return int(z["width"]), int(z["height"])
+            return None
+        if suffix == ".txt":
+            with open(path, "rb") as f:
+                first = f.readline().split()
+            if len(first) == 2 and all(t.isdigit() for t in first):
+                return int(first[0]), int(first[1])
+    except (OSError, ValueError, KeyError, RuntimeError):
+        return None
+    return None
+
+
+def _to_us(t: np.ndarray, span_hint: float | None = None) -> np.ndarray:
+    """Integer times are microseconds; float times are seconds when the span is < 1e4."""
+    t = np.asarray(t)
+    if np.issubdtype(t.dtype, np.integer) or np.issubdtype(t.dtype, np.bool_):
+        return t.astype(np.int64)
+    span = span_hint if span_hint is not None else (float(t.max() - t.min()) if t.size else 0.0)
+    if not np.all(np.isfinite(t)):
+        raise ValueError("event times have NaN or infinite values")
+    return np.rint(t * 1e6).astype(np.int64) if span < 1e4 else np.rint(t).astype(np.int64)
+
+
+def _polarity(p: np.ndarray) -> np.ndarray:
+    p = np.asarray(p)
+    return (p > 0).astype(np.uint8)
+
+
+def _coords(path: Path, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x)
+    y = np.asarray(y)
+    if x.size and (x.min() < 0 or y.min() < 0):
+        raise InputError(path, "negative event coordinates")
+    if x.size and (x.max() > 65535 or y.max() > 65535):
+        raise InputError(path, "event coordinates beyond 65535")
+    return x.astype(np.uint16), y.astype(np.uint16)
+
+
+# --- AEDAT4 ------------------------------------------------------------------------------
+
+def _aedat4(path: Path, chunk: int) -> Iterator[Arrays]:
+    try:
+        import aedat  # type: ignore[import-not-found]
+    except ImportError:
+        raise InputError(path, "reading .aedat4 needs the 'aedat' package (pip install aedat)") from None
+    with open(path, "rb") as f:
+        if not f.read(14).startswith(b"#!AER-DAT4.0"):
+            raise InputError(path, "not an AEDAT 4.0 file (missing '#!AER-DAT4.0' magic)")
+    try:
+        dec = aedat.Decoder(str(path))
+        buf: list[np.ndarray] = []
+        have = 0
+        for packet in dec:
+            if "events" not in packet:
+                continue
+            ev = packet["events"]
+            buf.append(ev)
+            have += ev.size
+            if have >= chunk:
+                yield _aedat_arrays(np.concatenate(buf))
+                buf, have = [], 0
+        if buf:
+            yield _aedat_arrays(np.concatenate(buf))
+    except InputError:
+        raise
+    except Exception as exc:  # the Rust decoder raises plain Exceptions on corrupt data
+        raise InputError(path, f"corrupt AEDAT4 data ({exc})") from None
+
+
+def _aedat_arrays(ev: np.ndarray) -> Arrays:
+    return ev["x"].astype(np.uint16), ev["y"].astype(np.uint16), ev["t"].astype(np.int64), ev["on"].astype(np.uint8)
+
+
+# --- HDF5 --------------------------------------------------------------------------------
+
+def _hdf5(path: Path, chunk: int) -> Iterator[Arrays]:
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(path, f"not a readable HDF5 file ({exc})") from None
+    with f:
+        offset = int(np.asarray(f["t_offset"])) if "t_offset" in f else 0
+        group = None
+        for cand in ("events", ""):
+            if cand and cand not in f:
+                continue
+            g = f[cand] if cand else f
+            if isinstance(g, h5py.Group) and all(k in g for k in ("x", "y")) and _find(g, _T_NAMES) and _find(g, _P_NAMES):
+                group = g
+                break
+        if group is not None:
+            x_ds, y_ds = group["x"], group["y"]
+            t_ds, p_ds = group[_find(group, _T_NAMES)], group[_find(group, _P_NAMES)]
+            n = t_ds.shape[0]
+            if not (x_ds.shape[0] == y_ds.shape[0] == p_ds.shape[0] == n):
+                raise InputError(path, "HDF5 event arrays x, y, t, p have different lengths")
+            float_t = not np.issubdtype(t_ds.dtype, np.integer)
+            span = float(t_ds[-1] - t_ds[0]) if (float_t and n) else None
+            for i in range(0, n, chunk):
+                t = _to_us(t_ds[i:i + chunk], span) + offset
+                x, y = _coords(path, x_ds[i:i + chunk], y_ds[i:i + chunk])
+                yield x, y, t, _polarity(p_ds[i:i + chunk])
+            return
+        table = None
+        for cand in ("events", "CD/events"):
+            if cand in f and isinstance(f[cand], h5py.Dataset) and f[cand].dtype.names:
+                table = f[cand]
+                break
+        if table is None:
+            raise InputError(path, "no events found (expected events/{x,y,t,p}, root x,y,t,p or a compound 'events' table)")
+        names = table.dtype.names
+        tn, pn = _pick(names, _T_NAMES), _pick(names, _P_NAMES)
+        if tn is None or pn is None or "x" not in names or "y" not in names:
+            raise InputError(path, f"event table fields are {names}; expected x, y, t, p")
+        try:
+            for i in range(0, table.shape[0], chunk):
+                rec = table[i:i + chunk]
+                x, y = _coords(path, rec["x"], rec["y"])
+                yield x, y, _to_us(rec[tn]) + offset, _polarity(rec[pn])
+        except OSError as exc:
+            raise InputError(path, f"cannot read the event table ({exc}); Prophesee ECF-compressed HDF5 needs its plugin") from None
+
+
+def _find(group, names) -> str | None:
+    return next((n for n in names if n in group), None)
+
+
+def _pick(names, wanted) -> str | None:
+    return next((n for n in wanted if n in names), None)
+
+
+# --- numpy -------------------------------------------------------------------------------
+
+def _numpy(path: Path, chunk: int) -> Iterator[Arrays]:
+    if path.suffix.lower() == ".npy":
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        yield from _from_array(path, arr, chunk)
+        return
+    with np.load(path, allow_pickle=False) as z:
+        files = z.files
+        if "x" in files and "y" in files and _pick(files, _T_NAMES) and _pick(files, _P_NAMES):
+            x, y = z["x"], z["y"]
+            t, p = z[_pick(files, _T_NAMES)], z[_pick(files, _P_NAMES)]
+            if not (x.shape[0] == y.shape[0] == t.shape[0] == p.shape[0]):
+                raise InputError(path, "npz event arrays x, y, t, p have different lengths")
+            span = float(t.max() - t.min()) if t.size else 0.0
+            for i in range(0, t.shape[0], chunk):
+                xs, ys = _coords(path, x[i:i + chunk], y[i:i + chunk])
+                yield xs, ys, _to_us(t[i:i + chunk], span), _polarity(p[i:i + chunk])
+            return
+        key = "events" if "events" in files else (files[0] if len(files) == 1 else None)
+        if key is None:
+            raise InputError(path, f"npz holds {files}; expected x, y, t, p arrays or an 'events' array")
+        yield from _from_array(path, z[key], chunk)
+
+
+def _from_array(path: Path, arr: np.ndarray, chunk: int) -> Iterator[Arrays]:
+    if arr.dtype.names:
+        names = arr.dtype.names
+        tn, pn = _pick(names, _T_NAMES), _pick(names, _P_NAMES)
+        if tn is None or pn is None or "x" not in names or "y" not in names:
+            raise InputError(path, f"event array fields are {names}; expected x, y, t, p")
+        t_all = arr[tn]
+        span = float(t_all.max() - t_all.min()) if t_all.size else 0.0
+        for i in range(0, arr.shape[0], chunk):
+            rec = arr[i:i + chunk]
+            x, y = _coords(path, rec["x"], rec["y"])
+            yield x, y, _to_us(rec[tn], span), _polarity(rec[pn])
+        return
+    if arr.ndim != 2 or arr.shape[1] != 4:
+        raise InputError(path, f"expected a structured event array or (N, 4) columns t, x, y, p; got shape {arr.shape}")
+    span = float(arr[:, 0].max() - arr[:, 0].min()) if arr.shape[0] else 0.0
+    for i in range(0, arr.shape[0], chunk):
+        block = np.asarray(arr[i:i + chunk])
+        x, y = _coords(path, block[:, 1], block[:, 2])
+        yield x, y, _to_us(block[:, 0], span), _polarity(block[:, 3])
+
+
+# --- text --------------------------------------------------------------------------------
+
+def _text(path: Path, chunk: int) -> Iterator[Arrays]:
+    seconds: bool | None = None
+    line_no = 0
+    first = True
+    with open(path, "rb") as f:
+        for body in _line_blocks(f, max(1 << 20, chunk * 24)):
+            if first:
+                first = False
+                head, _, tail = body.partition(b"\n")
+                tokens = head.split()
+                if len(tokens) == 2 and all(t.isdigit() for t in tokens):  # "W H" size line
+                    body = tail
+                    line_no += 1
+            if b"#" in body:
+                body = b"\n".join(ln for ln in body.split(b"\n") if not ln.lstrip().startswith(b"#"))
+            if not body.strip():
+                continue
+            if seconds is None:
+                tok = body.split(None, 1)[0]
+                seconds = b"." in tok or b"e" in tok.lower()
+            try:
+                flat = np.array(body.split(), dtype=np.float64)
+            except ValueError:
+                raise InputError(path, f"non-numeric text after line {line_no}; expected 't x y p' per line") from None
+            if flat.size % 4:
+                raise InputError(path, f"text events must have 4 columns (t x y p); bad line after line {line_no}")
+            table = flat.reshape(-1, 4)
+            line_no += table.shape[0]
+            t = np.rint(table[:, 0] * 1e6).astype(np.int64) if seconds else table[:, 0].astype(np.int64)
+            x, y = _coords(path, table[:, 1], table[:, 2])
+            yield x, y, t, _polarity(table[:, 3])
+
+
+def _line_blocks(f, block_bytes: int) -> Iterator[bytes]:
+    """Read a text file in blocks that end on a line boundary."""
+    rest = b""
+    while True:
+        data = f.read(block_bytes)
+        if not data:
+            if rest.strip():
+                yield rest
+            return
+        data = rest + data
+        cut = data.rfind(b"\n") + 1
+        if cut == 0:
+            rest = data
+            continue
+        yield data[:cut]
+        rest = data[cut:]
