@@ -1,0 +1,117 @@
+"""Slider-to-overlay latency at full size (1280x720 map, 75k lidar points), server side.
+
+Times what the app does when a seed slider moves: build the extrinsic from the six slider
+values, project the points, draw them on the contrast-stretched map, and JPEG-encode the
+frame for the browser. Target: <= 100 ms. Run: ``python benchmarks/bench_overlay.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from l2e_studio.app.overlay import (
+    OverlayStyle,
+    compose_before_after,
+    encode_jpeg,
+    grey_rgb,
+    intensity_colors,
+    normalise_map,
+    project_scene,
+    render_overlay,
+)
+from l2e_studio.app.pose import BODY_TO_OPTICAL, extrinsic_from_sliders
+from l2e_studio.camera import CameraModel
+from l2e_studio.geometry import Extrinsic
+
+
+
+def full_size_scene(n_points: int, width: int, height: int, seed: int = 0):
+    """A camera like the paper's (63x38 deg, radtan) and a 120x25 deg lidar scan in front of it."""
+    rng = np.random.default_rng(seed)
+    fx = (width / 2) / np.tan(np.radians(31.5))
+    K = np.array([[fx, 0, width / 2 - 0.5], [0, fx, height / 2 - 0.5], [0, 0, 1]])
+    camera = CameraModel(K, width, height, D=np.array([-0.08, 0.05, 0.001, -0.001, 0.0]))
+    az = np.radians(rng.uniform(-60, 60, n_points))
+    el = np.radians(rng.uniform(-12.5, 12.5, n_points))
+    r = rng.uniform(3.0, 30.0, n_points)
+    pts = np.stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)], 1)
+    intensity = rng.uniform(0, 255, n_points).astype(np.float32)
+    return camera, pts.astype(np.float32), intensity
+
+
+def event_map_for(points, extrinsic, camera, seed: int = 1) -> np.ndarray:
+    """A plausible accumulated map: counts where the laser hits at ``extrinsic``, plus noise."""
+    rng = np.random.default_rng(seed)
+    proj = project_scene(points, extrinsic, camera)
+    m = rng.poisson(0.05, (camera.height, camera.width)).astype(np.float32)
+    u = np.rint(proj.uv[:, 0]).astype(int)
+    v = np.rint(proj.uv[:, 1]).astype(int)
+    np.add.at(m, (v, u), rng.poisson(8.0, u.size).astype(np.float32))
+    return m
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--points", type=int, default=75_000)
+    parser.add_argument("--width", type=int, default=1280)
+    parser.add_argument("--height", type=int, default=720)
+    parser.add_argument("--repeats", type=int, default=60)
+    parser.add_argument("--point-size", type=int, default=3)
+    args = parser.parse_args()
+
+    camera, pts, intensity = full_size_scene(args.points, args.width, args.height)
+    T = np.eye(4)
+    T[:3, :3] = BODY_TO_OPTICAL  # lidar x forward, y left, z up -> optical camera frame
+    T[:3, 3] = (0.05, -0.1, 0.02)
+    seed = Extrinsic.from_matrix(T)
+    event_map = event_map_for(pts, seed, camera)
+    base = grey_rgb(normalise_map(event_map), 1.0)  # cached per scene + contrast in the app
+    colors = intensity_colors(intensity)  # cached per scene in the app
+    visible = project_scene(pts, seed, camera).index.size
+
+    rows = []
+    for color_by in ("intensity", "depth"):
+        for opacity in (1.0, 0.8):
+            style = OverlayStyle(color_by=color_by, point_size=args.point_size, opacity=opacity)
+            times, sizes, encode = [], [], []
+            for i in range(args.repeats):
+                t0 = time.perf_counter()
+                sliders = np.concatenate([seed.translation + 0.001 * i, (0.05 * i, -0.03 * i, 0.02 * i)])
+                ext = extrinsic_from_sliders(sliders, seed)
+                img = render_overlay(base, pts, ext, camera, style, colors)
+                t1 = time.perf_counter()
+                data = encode_jpeg(img, 80)
+                t2 = time.perf_counter()
+                times.append(t2 - t0)
+                encode.append(t2 - t1)
+                sizes.append(len(data))
+            t = np.array(times[3:]) * 1e3
+            rows.append((color_by, opacity, np.median(t), np.percentile(t, 95), np.median(encode[3:]) * 1e3, np.mean(sizes) / 1024))
+
+    print(
+        f"overlay latency, {args.width}x{args.height} map, {args.points} points "
+        f"({visible} in the image), point size {args.point_size}px"
+    )
+    print(f"{'colour':>10} {'opacity':>8} {'median ms':>10} {'p95 ms':>8} {'(jpeg ms)':>10} {'KiB':>7}")
+    for color_by, opacity, med, p95, enc, kib in rows:
+        print(f"{color_by:>10} {opacity:>8.2f} {med:>10.1f} {p95:>8.1f} {enc:>10.1f} {kib:>7.0f}")
+
+    ext_a = seed
+    ext_b = seed.perturbed([0.02, 0, 0], [0, 0.01, 0])
+    style = OverlayStyle(point_size=args.point_size)
+    a = render_overlay(base, pts, ext_a, camera, style, colors)
+    b = render_overlay(base, pts, ext_b, camera, style, colors)
+    for mode in ("side by side", "swipe", "blend"):
+        ts = []
+        for _ in range(10):
+            t0 = time.perf_counter()
+            encode_jpeg(compose_before_after(a, b, mode, 0.5))
+            ts.append(time.perf_counter() - t0)
+        print(f"before/after compose+encode ({mode}): median {np.median(ts) * 1e3:.1f} ms")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,83 @@
+"""Files the workbench writes: result + before/after PNG, and seed files.
+
+Names carry a timestamp and never replace an existing file (a clash gets ``-1``, ``-2``...);
+the writing itself is :mod:`l2e_studio.export`'s (atomic, the headless command's format).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..calibrate import CalibrationResult
+from ..camera import CameraModel
+from ..errors import InputError
+from ..export import atomic_write_bytes, extrinsic_to_dict, write_result
+from ..geometry import Extrinsic
+from ..io.cameras import load_seed
+from .overlay import encode_png
+
+SEED_SUFFIXES = (".yaml", ".yml", ".json", ".txt", ".npy")
+
+
+def fresh_path(folder: Path, stem: str, suffix: str, when: _dt.datetime | None = None) -> Path:
+    """``folder/<stem>_<YYYYmmdd-HHMMSS>[-n]<suffix>`` that does not exist yet."""
+    stamp = (when or _dt.datetime.now()).strftime("%Y%m%d-%H%M%S")
+    for i in range(1000):
+        path = folder / f"{stem}_{stamp}{'-' + str(i) if i else ''}{suffix}"
+        if not path.exists() and not path.with_name(path.stem + "_before_after.png").exists():
+            return path
+    raise FileExistsError(f"no free file name for {stem} in {folder}")
+
+
+def save_result(
+    folder: Path, result: CalibrationResult, camera: CameraModel, scenes_dir: Path, before_after: np.ndarray | None
+) -> tuple[Path, Path | None]:
+    """Write the result file (YAML) and, when given, the before/after image beside it."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(folder, f"cannot create the results folder ({exc.strerror})") from None
+    path = fresh_path(folder, "l2e_result", ".yaml")
+    write_result(path, result, camera, scenes_dir)
+    png = None
+    if before_after is not None:
+        png = path.with_name(path.stem + "_before_after.png")
+        atomic_write_bytes(png, encode_png(before_after))
+    return path, png
+
+
+def seed_document(extrinsic: Extrinsic, note: str = "") -> bytes:
+    """A seed file (``seed:`` section of our camera.yaml) that :func:`load_seed` reads back."""
+    rep = extrinsic_to_dict(extrinsic)
+    doc = {"seed": {"translation": rep["translation"], "rotvec": rep["rotvec"]},
+           "as_matrix": {"T_cam_lidar": rep["T_cam_lidar"]}, "rpy_deg": rep["rpy_deg"]}
+    header = "# Seed T_cam_lidar (X_cam = R X_lidar + t), written by the L2E Studio workbench.\n"
+    if note:
+        header += f"# {note}\n"
+    return (header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)).encode()
+
+
+def save_seed(folder: Path, extrinsic: Extrinsic) -> Path:
+    path = fresh_path(Path(folder), "seed", ".yaml")
+    atomic_write_bytes(path, seed_document(extrinsic))
+    return path
+
+
+def seed_from_upload(name: str, content: bytes) -> Extrinsic:
+    """Parse an uploaded seed file (any format :func:`load_seed` knows) without keeping it."""
+    suffix = Path(name).suffix.lower()
+    if suffix not in SEED_SUFFIXES:
+        raise InputError(name, f"unsupported seed file type {suffix or '(none)'}; expected one of {', '.join(SEED_SUFFIXES)}")
+    with tempfile.TemporaryDirectory(prefix="l2e_seed_") as tmp:
+        path = Path(tmp) / Path(name).name
+        path.write_bytes(content)
+        try:
+            return load_seed(path)
+        except InputError as exc:
+            raise InputError(name, exc.problem) from None

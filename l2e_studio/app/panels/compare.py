@@ -1,0 +1,64 @@
+"""Before / after: the seed and the result overlays of the selected scene, side by side or
+with a swipe or blend control (a tab of the overlay panel)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..overlay import COMPARE_MODES, compose_before_after
+from ..state import Snapshot
+
+if TYPE_CHECKING:
+    from ..server import App
+    from .overlay_view import OverlayPanel
+
+NO_RESULT = "No result yet: run the optimisation (Optimise tab) to compare the seed with the result."
+
+
+class ComparePanel:
+    def __init__(self, app: "App", overlay: "OverlayPanel") -> None:
+        self.app = app
+        self.overlay = overlay
+        gui = app.server.gui
+        cam = app.camera
+        with overlay.compare_tab:
+            self.caption = gui.add_markdown(NO_RESULT)
+            self.image = gui.add_image(np.zeros((cam.height // 2, cam.width, 3), np.uint8), format="jpeg", jpeg_quality=85)
+            self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="side by side")
+            self.amount = gui.add_slider("Swipe / blend", 0.0, 1.0, 0.01, 0.5,
+                                         hint="Swipe: where the seed ends and the result begins; blend: share of the result")
+        self.mode.on_update(lambda _: app.compare_worker.poke())
+        self.amount.on_update(lambda _: app.compare_worker.poke())
+        self.frames = 0
+
+    def compose(self, snap: Snapshot, mode: str | None = None, scale: float = 0.5) -> np.ndarray | None:
+        """The before/after image of the selected scene, or None without a result."""
+        result = snap.result
+        if result is None:
+            return None
+        style = self.overlay.style()
+        before = self.overlay.draw(snap.selected, result.seed, style)
+        after = self.overlay.draw(snap.selected, result.extrinsic, style)
+        return compose_before_after(before, after, mode or self.mode.value, float(self.amount.value), scale)
+
+    def render(self) -> None:
+        snap = self.app.state.snapshot()
+        img = self.compose(snap)
+        if img is None:
+            self.caption.content = NO_RESULT
+            return
+        r = snap.result
+        name = self.app.state.scene_names[snap.selected]
+        try:
+            k = list(r.scene_names).index(name)
+            scores = f"MI of this scene {r.mi_seed_per_scene[k]:.4f} (seed) -> {r.mi_result_per_scene[k]:.4f} (result)"
+        except ValueError:  # held out of the optimisation: score it with the readout's stack
+            everything = [True] * len(self.app.state.scene_names)
+            mi_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
+            mi_res = self.app.readout.read(r.extrinsic, everything).per_scene[snap.selected]
+            scores = f"held out of the optimisation; MI {mi_seed:.4f} (seed) -> {mi_res:.4f} (result)"
+        self.caption.content = f"**{name}**: {scores}"
+        self.image.image = img
+        self.frames += 1

@@ -1,0 +1,81 @@
+"""The 3D view: the selected scene's lidar cloud (lidar frame = world), the camera frustum at
+the current extrinsic showing the event map, and a transform gizmo on the camera that edits
+the same extrinsic as the sliders."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...geometry import Extrinsic
+
+if TYPE_CHECKING:
+    from ..server import App
+
+FRUSTUM_SCALE = 0.6  # m
+GIZMO_SCALE = 0.9
+
+
+def camera_pose(extrinsic: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
+    """(wxyz, position) of the camera in the lidar frame, i.e. ``T_lidar_cam``."""
+    inv = extrinsic.inverse()
+    x, y, z, w = inv.quaternion_xyzw
+    return np.array([w, x, y, z]), inv.translation
+
+
+def extrinsic_from_pose(wxyz: np.ndarray, position: np.ndarray) -> Extrinsic:
+    """``T_cam_lidar`` from the camera's pose in the lidar frame."""
+    w, x, y, z = np.asarray(wxyz, dtype=np.float64)
+    return Extrinsic.from_quaternion([x, y, z, w], position).inverse()
+
+
+class View3D:
+    def __init__(self, app: "App") -> None:
+        self.app = app
+        scene = app.server.scene
+        cam = app.camera
+        scene.set_up_direction("+z")  # lidar frames are z-up
+        points, colors = app.displays[0].cloud()
+        self.cloud = scene.add_point_cloud("/lidar", points, colors, point_size=0.04, point_shape="circle",
+                                           point_shading="flat")
+        wxyz, pos = camera_pose(app.state.reference)
+        self.gizmo = scene.add_transform_controls("/camera", scale=GIZMO_SCALE, wxyz=wxyz, position=pos,
+                                                  depth_test=False, opacity=0.8)
+        fov = 2.0 * np.arctan2(cam.height / 2.0, cam.K[1, 1])
+        self.frustum = scene.add_camera_frustum(
+            "/camera/frustum", fov=float(fov), aspect=cam.width / cam.height, scale=FRUSTUM_SCALE,
+            image=app.displays[0].thumbnail(), format="jpeg", color=(230, 80, 20),
+        )
+        self.shown_scene = 0
+        self.gizmo.on_update(self._on_gizmo)
+        self._place_viewer(app.state.reference, points)
+
+    def _place_viewer(self, extrinsic: Extrinsic, points: np.ndarray) -> None:
+        """Start the browser's viewpoint behind and above the camera, looking along it."""
+        wxyz, pos = camera_pose(extrinsic)
+        forward = extrinsic.inverse().R[:, 2]
+        depth = float(np.median(np.linalg.norm(points, axis=1))) if len(points) else 5.0
+        ic = self.app.server.initial_camera
+        ic.position = tuple(pos - 0.6 * depth * forward + np.array([0.0, 0.0, 0.35 * depth]))
+        ic.look_at = tuple(pos + 0.5 * depth * forward)
+        ic.up = (0.0, 0.0, 1.0)
+
+    def _on_gizmo(self, event) -> None:
+        ext = extrinsic_from_pose(self.gizmo.wxyz, self.gizmo.position)
+        self.app.set_extrinsic(ext, source="gizmo")
+
+    def show_pose(self, extrinsic: Extrinsic) -> None:
+        wxyz, pos = camera_pose(extrinsic)
+        self.gizmo.wxyz = wxyz
+        self.gizmo.position = pos
+
+    def show_scene(self, index: int) -> None:
+        if index == self.shown_scene:
+            return
+        disp = self.app.displays[index]
+        points, colors = disp.cloud()
+        self.cloud.points = points.astype(np.float32)
+        self.cloud.colors = colors
+        self.frustum.image = disp.thumbnail()
+        self.shown_scene = index

@@ -1,0 +1,306 @@
+"""The workbench server: one viser server, one shared session, the panels and the workers.
+
+:func:`build_app` wires a loaded :class:`~l2e_studio.scenes.SceneSet` into a running
+:class:`App`; :func:`serve` does that and blocks (the ``l2e-studio`` command). Every GUI element
+is created on the server (``server.gui``/``server.scene``), so every browser tab shows the same
+state, and the optimisation runs in a thread of its own, so closing a tab loses nothing.
+The app holds no calibration logic: MI comes from :mod:`l2e_studio.objective`, the search from
+:func:`l2e_studio.calibrate.calibrate`, files from :mod:`l2e_studio.export`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import viser
+
+from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
+from ..geometry import Extrinsic
+from ..scenes import SceneSet
+from .display import SceneDisplay
+from .files import save_result
+from .panels.compare import ComparePanel
+from .panels.extrinsic import ExtrinsicPanel
+from .panels.optimise import OptimisePanel
+from .panels.overlay_view import OverlayPanel
+from .panels.results import ResultPanel
+from .panels.scenes import ScenesPanel
+from .panels.view3d import View3D
+from .readout import MiReading, MiReadout
+from .state import SessionState
+from .workers import LatestWorker, Ticker
+
+log = logging.getLogger(__name__)
+
+TITLE = "L2E Studio"
+OVERLAY_PANEL_WIDTH = 760  # px; the 3D view takes what is left between the two panels
+PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
+
+
+class App:
+    """A running workbench. Create with :func:`build_app`; stop with :meth:`stop`."""
+
+    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path, sigma: float = 5.0) -> None:
+        self.scene_set = scene_set
+        self.server = server
+        self.camera = scene_set.camera
+        self.out_dir = Path(out_dir)
+        self.state = SessionState(scene_set.names, reference=scene_set.seed)
+        self.displays = [SceneDisplay(s) for s in scene_set.scenes]
+        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, sigma)
+        self.reading: MiReading | None = None
+        self._reference_mi: dict[tuple, float] = {}
+        self._cancel: threading.Event | None = None
+        self._run_thread: threading.Thread | None = None
+        self._ticker: Ticker | None = None
+        self.overlay_seconds: list[float] = []  # server-side render+encode time of each frame
+
+        gui = server.gui
+        gui.configure_theme(control_width="large", show_share_button=False, brand_color=(28, 126, 214))
+        gui.set_panel_label(TITLE)
+        server.gui.main_panel.dock_right()
+        self.overlay = OverlayPanel(self)
+        tabs = gui.add_tab_group()
+        with tabs.add_tab("Scenes", viser.Icon.LIST):
+            self.scenes = ScenesPanel(self)
+        with tabs.add_tab("Seed", viser.Icon.ADJUSTMENTS):
+            self.extrinsic = ExtrinsicPanel(self)
+        with tabs.add_tab("Optimise", viser.Icon.PLAYER_PLAY):
+            self.optimise = OptimisePanel(self)
+        with tabs.add_tab("Result", viser.Icon.CHECKLIST):
+            self.results = ResultPanel(self)
+        self.compare = ComparePanel(self, self.overlay)
+        self.view3d = View3D(self)
+
+        self.overlay_worker = LatestWorker("overlay", self._render_overlay)
+        self.mi_worker = LatestWorker("mi", self._update_mi)
+        self.compare_worker = LatestWorker("compare", self.compare.render)
+        self.refresh()
+
+    # --- the URL ----------------------------------------------------------------------------
+    @property
+    def url(self) -> str:
+        host = self.server.get_host()
+        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        return f"http://{shown}:{self.server.get_port()}"
+
+    # --- changes from any panel ----------------------------------------------------------------
+    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> None:
+        """Make ``extrinsic`` current and update every view except the one it came from."""
+        self.state.set_extrinsic(extrinsic)
+        if source != "sliders":
+            self.extrinsic.show(extrinsic)
+        if source != "gizmo":
+            self.view3d.show_pose(extrinsic)
+        self.extrinsic.show_pose_text(extrinsic)
+        self.overlay_worker.poke()
+        self.mi_worker.poke()
+
+    def select_scene(self, index: int) -> None:
+        self.state.select(index)
+        self.scenes.show_selection()
+        self.view3d.show_scene(index)
+        self.overlay_worker.poke()
+        self.mi_worker.poke()
+        self.compare_worker.poke()
+
+    def inclusion_changed(self) -> None:
+        self.scenes.show_selection()
+        self.mi_worker.poke()
+
+    def display_changed(self) -> None:
+        """A display control moved (colour, size, opacity, contrast, map)."""
+        self.overlay_worker.poke()
+        self.compare_worker.poke()
+
+    def sigma_changed(self, sigma: float) -> None:
+        self.readout.set_sigma(sigma)
+        self.mi_worker.poke()
+        self.overlay_worker.poke()
+
+    def refresh(self) -> None:
+        """Redraw everything from the state (start-up, accept, reset)."""
+        snap = self.state.snapshot()
+        self.extrinsic.show(snap.extrinsic)
+        self.extrinsic.show_pose_text(snap.extrinsic)
+        self.view3d.show_scene(snap.selected)
+        self.view3d.show_pose(snap.extrinsic)
+        self.scenes.show_selection()
+        self.results.show(snap)
+        self.overlay_worker.poke()
+        self.mi_worker.poke()
+        self.compare_worker.poke()
+
+    # --- workers ----------------------------------------------------------------------------
+    def _render_overlay(self) -> None:
+        t0 = time.perf_counter()
+        snap = self.state.snapshot()
+        self.overlay.render(snap)
+        self.overlay_seconds.append(time.perf_counter() - t0)
+        del self.overlay_seconds[:-200]
+
+    def _update_mi(self) -> None:
+        snap = self.state.snapshot()
+        reading = self.readout.read(snap.extrinsic, snap.included)
+        key = (self.readout.sigma, snap.included)
+        if key not in self._reference_mi:
+            self._reference_mi[key] = self.readout.read(snap.reference, snap.included).total
+        self.reading = reading
+        self.extrinsic.show_mi(reading, snap, self._reference_mi[key])
+        self.scenes.show_mi(reading)
+        self.overlay.show_caption(snap, reading)
+
+    # --- the optimisation -----------------------------------------------------------------------
+    def start_run(self, settings: CalibrationSettings) -> int:
+        """Start an optimisation of the included scenes from the current extrinsic."""
+        run_id = self.state.begin_run()
+        snap = self.state.snapshot()
+        scenes = [self.scene_set.scenes[i] for i, flag in enumerate(snap.included) if flag]
+        cancel = threading.Event()
+        self._cancel = cancel
+
+        def on_progress(p: Progress) -> None:
+            self.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
+
+        def work() -> None:
+            try:
+                result = calibrate(scenes, self.camera, snap.extrinsic, settings, on_progress, cancel)
+                self.state.finish_run(run_id, result)
+            except Exception as exc:  # shown to the user; the app keeps running
+                log.exception("optimisation failed")
+                self.state.finish_run(run_id, error=f"{type(exc).__name__}: {exc}")
+            self._run_finished(run_id)
+
+        self.optimise.show_running(True)
+        self._ticker = Ticker("progress", self._push_progress, lambda: self.state.snapshot().run.active, PROGRESS_PERIOD)
+        self._run_thread = threading.Thread(target=work, name="l2e-calibrate", daemon=True)
+        self._run_thread.start()
+        return run_id
+
+    def cancel_run(self) -> bool:
+        """Ask a running optimisation to stop (it returns its best point so far)."""
+        if self._cancel is None or not self.state.snapshot().run.active:
+            return False
+        self._cancel.set()
+        return True
+
+    def wait_run(self, timeout: float = 60.0) -> bool:
+        t = self._run_thread
+        if t is not None:
+            t.join(timeout)
+            return not t.is_alive()
+        return True
+
+    def _push_progress(self) -> None:
+        snap = self.state.snapshot()
+        self.optimise.show_progress(snap.run)
+        if snap.follow_best:
+            self.overlay_worker.poke()
+
+    def _run_finished(self, run_id: int) -> None:
+        if self._ticker is not None:
+            self._ticker.stop(2.0)
+        snap = self.state.snapshot()
+        self.optimise.show_progress(snap.run)
+        self.optimise.show_running(False)
+        self.results.show(snap)
+        self.overlay_worker.poke()
+        self.compare_worker.poke()
+        run = snap.run
+        if run.status == "failed":
+            self.notify_all("Optimisation failed", run.error, color="red")
+        elif snap.result is not None:
+            r: CalibrationResult = snap.result
+            verb = "cancelled" if r.cancelled else "finished"
+            self.notify_all(
+                f"Optimisation {verb}",
+                f"MI {r.mi_seed:.4f} -> {r.mi_result:.4f} after {r.evaluations} evaluations "
+                f"({r.seconds:.1f} s). See the Result tab and Before / after.",
+                color="yellow" if r.cancelled else "green",
+            )
+
+    # --- results ----------------------------------------------------------------------------------
+    def accept_result(self) -> None:
+        ext = self.state.accept_result()
+        self.set_extrinsic(ext, source="accept")
+
+    def save_result(self) -> tuple[Path, Path | None]:
+        """Write the result file and a full-size side-by-side PNG of the selected scene."""
+        snap = self.state.snapshot()
+        if snap.result is None:
+            raise RuntimeError("there is no result to save")
+        image = self.compare.compose(snap, mode="side by side", scale=1.0)
+        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image)
+
+    def discard_result(self) -> None:
+        self.state.discard_result()
+        self.results.show(self.state.snapshot())
+        self.compare_worker.poke()
+
+    # --- notifications --------------------------------------------------------------------------------
+    def notify(self, client: Any, title: str, body: str, color: str | None = None) -> None:
+        """Show a notification in one tab (``client``), or in all when ``client`` is None."""
+        if client is None:
+            self.notify_all(title, body, color)
+            return
+        client.add_notification(title, body, auto_close_seconds=12.0, color=color)
+
+    def notify_all(self, title: str, body: str, color: str | None = None) -> None:
+        for client in self.server.get_clients().values():
+            try:
+                client.add_notification(title, body, auto_close_seconds=12.0, color=color)
+            except Exception:  # a tab closing right now
+                log.debug("notification to a closing client failed", exc_info=True)
+
+    # --- shutdown -------------------------------------------------------------------------------------
+    def stop(self) -> None:
+        self.cancel_run()
+        self.wait_run(5.0)
+        for worker in (self.overlay_worker, self.mi_worker, self.compare_worker):
+            worker.stop()
+        self.server.stop()
+
+
+def build_app(
+    scene_set: SceneSet,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    out_dir: str | Path | None = None,
+    verbose: bool = False,
+) -> App:
+    """Start a viser server on ``host:port`` and build the workbench on it."""
+    server = viser.ViserServer(host=host, port=port, label=TITLE, verbose=verbose)
+    out = Path(out_dir) if out_dir is not None else Path(scene_set.root) / "results"
+    try:
+        return App(scene_set, server, out)
+    except BaseException:
+        server.stop()
+        raise
+
+
+def serve(
+    scene_set: SceneSet,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    out_dir: str | Path | None = None,
+    on_ready: Callable[[App], None] | None = None,
+    stop: threading.Event | None = None,
+) -> None:
+    """Serve until interrupted (or until ``stop`` is set)."""
+    app = build_app(scene_set, host, port, out_dir)
+    if on_ready is not None:
+        on_ready(app)
+    try:
+        if stop is None:
+            while True:
+                time.sleep(3600)
+        else:
+            stop.wait()
+    finally:
+        app.stop()

@@ -1,0 +1,220 @@
+"""The workbench's shared session state: one per server, seen by every browser tab.
+
+A plain object guarded by one lock, with no viser import, so that its rules can be unit
+tested: the current extrinsic, the selected and included scenes, the optimisation run and the
+last result. GUI callbacks and the optimisation worker change it only through these methods;
+each change bumps ``version`` so that renderers can tell stale work from fresh.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from ..geometry import Extrinsic
+
+RUN_STATES = ("idle", "running", "done", "cancelled", "failed")
+
+
+@dataclass(frozen=True)
+class RunState:
+    """Where the optimisation stands. ``history`` holds (evaluation, MI, best MI) rows."""
+
+    status: str = "idle"
+    evaluations: int = 0
+    fraction: float = 0.0
+    stage: int = 0
+    stages: int = 0
+    mi: float = float("nan")
+    best_mi: float = float("nan")
+    best: Extrinsic | None = None
+    history: tuple[tuple[int, float, float], ...] = ()
+    error: str = ""
+    started: float = 0.0
+    finished: float = 0.0
+    run_id: int = 0
+
+    @property
+    def active(self) -> bool:
+        return self.status == "running"
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """A consistent copy of the state at one moment (what the renderers draw from)."""
+
+    version: int
+    extrinsic: Extrinsic
+    reference: Extrinsic
+    selected: int
+    included: tuple[bool, ...]
+    run: RunState
+    result: Any
+    follow_best: bool
+
+    @property
+    def shown_extrinsic(self) -> Extrinsic:
+        """The pose the overlay draws: the best estimate while a run is followed, else ours."""
+        if self.run.active and self.follow_best and self.run.best is not None:
+            return self.run.best
+        return self.extrinsic
+
+
+@dataclass
+class SessionState:
+    """Mutable state shared by all tabs. ``reference`` is the file's seed (reset target)."""
+
+    scene_names: list[str]
+    reference: Extrinsic
+    extrinsic: Extrinsic | None = None
+    selected: int = 0
+    included: list[bool] = field(default_factory=list)
+    run: RunState = field(default_factory=RunState)
+    result: Any = None  # a calibrate.CalibrationResult once a run finishes
+    follow_best: bool = True
+    version: int = 0
+    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.scene_names:
+            raise ValueError("a session needs at least one scene")
+        if self.extrinsic is None:
+            self.extrinsic = self.reference
+        if not self.included:
+            self.included = [True] * len(self.scene_names)
+        if len(self.included) != len(self.scene_names):
+            raise ValueError("included must have one flag per scene")
+
+    # --- reading -------------------------------------------------------------------------
+    def snapshot(self) -> Snapshot:
+        with self._lock:
+            assert self.extrinsic is not None
+            return Snapshot(
+                self.version,
+                self.extrinsic,
+                self.reference,
+                self.selected,
+                tuple(self.included),
+                self.run,
+                self.result,
+                self.follow_best,
+            )
+
+    def included_indices(self) -> list[int]:
+        with self._lock:
+            return [i for i, flag in enumerate(self.included) if flag]
+
+    # --- the extrinsic ---------------------------------------------------------------------
+    def set_extrinsic(self, extrinsic: Extrinsic) -> int:
+        """Make ``extrinsic`` the current one; returns the new version."""
+        with self._lock:
+            self.extrinsic = extrinsic
+            return self._bump()
+
+    def reset_extrinsic(self) -> Extrinsic:
+        """Back to the file's seed."""
+        with self._lock:
+            self.extrinsic = self.reference
+            self._bump()
+            return self.reference
+
+    # --- scenes ----------------------------------------------------------------------------
+    def select(self, index: int) -> int:
+        with self._lock:
+            if not 0 <= index < len(self.scene_names):
+                raise IndexError(f"scene index {index} out of range 0..{len(self.scene_names) - 1}")
+            self.selected = index
+            return self._bump()
+
+    def set_included(self, index: int, flag: bool) -> int:
+        with self._lock:
+            self.included[index] = bool(flag)
+            return self._bump()
+
+    def set_all_included(self, flag: bool) -> int:
+        with self._lock:
+            self.included = [bool(flag)] * len(self.scene_names)
+            return self._bump()
+
+    def set_follow_best(self, flag: bool) -> int:
+        with self._lock:
+            self.follow_best = bool(flag)
+            return self._bump()
+
+    # --- the optimisation run ---------------------------------------------------------------
+    def begin_run(self) -> int:
+        """Mark a run as started; raises if one is already running or no scene is included."""
+        with self._lock:
+            if self.run.active:
+                raise RuntimeError("an optimisation is already running")
+            if not any(self.included):
+                raise RuntimeError("no scene is included in the optimisation")
+            run_id = self.run.run_id + 1
+            self.run = RunState(status="running", started=time.time(), run_id=run_id, best=self.extrinsic)
+            self._bump()
+            return run_id
+
+    def record_progress(
+        self, run_id: int, evaluations: int, mi: float, best_mi: float, best: Extrinsic,
+        fraction: float, stage: int = 0, stages: int = 1,
+    ) -> bool:
+        """Add one evaluation to the running run; False (ignored) if ``run_id`` is stale."""
+        with self._lock:
+            if run_id != self.run.run_id or not self.run.active:
+                return False
+            row = (int(evaluations), float(mi), float(best_mi))
+            self.run = replace(
+                self.run,
+                evaluations=int(evaluations),
+                mi=float(mi),
+                best_mi=float(best_mi),
+                best=best,
+                fraction=float(np.clip(fraction, 0.0, 1.0)),
+                stage=int(stage),
+                stages=int(stages),
+                history=self.run.history + (row,),
+            )
+            self._bump()
+            return True
+
+    def finish_run(self, run_id: int, result: Any = None, error: str = "") -> bool:
+        """Close the run with its result (``result.cancelled`` marks a cancel) or an error."""
+        with self._lock:
+            if run_id != self.run.run_id:
+                return False
+            if error:
+                status = "failed"
+            elif result is not None and getattr(result, "cancelled", False):
+                status = "cancelled"
+            else:
+                status = "done"
+            best = getattr(result, "extrinsic", None) or self.run.best
+            self.run = replace(self.run, status=status, error=error, finished=time.time(), best=best,
+                               fraction=1.0 if status == "done" else self.run.fraction)
+            if result is not None:
+                self.result = result
+            self._bump()
+            return True
+
+    # --- the result ---------------------------------------------------------------------------
+    def accept_result(self) -> Extrinsic:
+        """The result becomes the current extrinsic (the seed of the next run)."""
+        with self._lock:
+            if self.result is None:
+                raise RuntimeError("there is no result to accept")
+            self.extrinsic = self.result.extrinsic
+            self._bump()
+            return self.extrinsic
+
+    def discard_result(self) -> None:
+        with self._lock:
+            self.result = None
+            self._bump()
+
+    def _bump(self) -> int:
+        self.version += 1
+        return self.version

@@ -1,0 +1,103 @@
+"""Background threads that keep the GUI callbacks short.
+
+A :class:`LatestWorker` runs one job function whenever it is poked; pokes that arrive while it
+is busy collapse into one more run, so a fast slider drag never queues up stale frames -- the
+view always catches up with the latest state. A :class:`Ticker` calls a function at a fixed
+rate while a condition holds (used to throttle progress updates during a run).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable
+
+log = logging.getLogger(__name__)
+
+
+class LatestWorker:
+    """Run ``job()`` in a daemon thread after each :meth:`poke`, coalescing bursts."""
+
+    def __init__(self, name: str, job: Callable[[], None], min_interval: float = 0.0) -> None:
+        self.name = name
+        self._job = job
+        self._min_interval = float(min_interval)
+        self._wake = threading.Event()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._lock = threading.Lock()
+        self._pending = False
+        self._stop = False
+        self.runs = 0
+        self.last_seconds = 0.0
+        self._thread = threading.Thread(target=self._loop, name=f"l2e-{name}", daemon=True)
+        self._thread.start()
+
+    def poke(self) -> None:
+        """Ask for one more run (after the current one, if busy)."""
+        with self._lock:
+            self._pending = True
+            self._idle.clear()
+            self._wake.set()
+
+    def wait_idle(self, timeout: float = 10.0) -> bool:
+        """Block until no run is pending (tests and shutdown)."""
+        return self._idle.wait(timeout)
+
+    def stop(self) -> None:
+        self._stop = True
+        self._wake.set()
+        self._thread.join(timeout=5.0)
+
+    def _loop(self) -> None:
+        while True:
+            self._wake.wait()
+            if self._stop:
+                return
+            with self._lock:
+                self._wake.clear()
+                self._pending = False
+            t0 = time.perf_counter()
+            try:
+                self._job()
+            except Exception:  # a failed frame must not kill the view
+                log.exception("%s worker failed", self.name)
+            self.runs += 1
+            self.last_seconds = time.perf_counter() - t0
+            if self._min_interval > self.last_seconds:
+                time.sleep(self._min_interval - self.last_seconds)
+            with self._lock:
+                if not self._pending:
+                    self._idle.set()
+
+
+class Ticker:
+    """Call ``tick()`` every ``period`` seconds while ``active()`` is true, then once more.
+
+    :meth:`stop` ends the wait at once (no waiting out the period when a run finishes).
+    """
+
+    def __init__(self, name: str, tick: Callable[[], None], active: Callable[[], bool], period: float = 0.2) -> None:
+        self._tick, self._active, self._period = tick, active, float(period)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=f"l2e-{name}", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float | None = None) -> None:
+        """Stop ticking after one last tick; waits for it."""
+        self._stop.set()
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        while self._active() and not self._stop.is_set():
+            t0 = time.perf_counter()
+            self._safe_tick()
+            self._stop.wait(max(0.0, self._period - (time.perf_counter() - t0)))
+        self._safe_tick()
+
+    def _safe_tick(self) -> None:
+        try:
+            self._tick()
+        except Exception:  # a failed update must not end the updates
+            log.exception("ticker failed")

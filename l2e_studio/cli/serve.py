@@ -1,0 +1,54 @@
+"""``l2e-studio [serve]``: the browser workbench."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+NAME = "serve"
+HELP = "Serve the browser workbench (the default command): l2e-studio --scenes DIR"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenes", type=Path, default=None,
+                        help="scene folder (event/ + lidar/ + camera.yaml or config/config.json); "
+                             "default: the embedded sample scenes")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address to bind (default 127.0.0.1: this machine only; use SSH port forwarding "
+                             "to reach it remotely)")
+    parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    parser.add_argument("--seed", type=Path, default=None, help="seed extrinsic file (overrides the folder's)")
+    parser.add_argument("--camera", type=Path, default=None, help="intrinsics file (overrides the folder's)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="folder for result and seed files (default: SCENES/results)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..errors import InputError
+    from ..samples import sample_scenes_dir
+    from ..scenes import load_scene_folder
+
+    folder = args.scenes if args.scenes is not None else sample_scenes_dir()
+    if not 0 < args.port < 65536:
+        raise InputError(None, f"--port must be 1..65535, got {args.port}")
+    print(f"Loading scenes from {folder} ...", flush=True)
+    scene_set = load_scene_folder(folder, seed_file=args.seed, camera_file=args.camera)
+    for failure in scene_set.failures:
+        print(f"  scene {failure.name} not loaded: {failure.error}", file=sys.stderr)
+    print(f"  {len(scene_set.scenes)} scenes, camera {scene_set.camera.width}x{scene_set.camera.height}, "
+          f"seed from {scene_set.seed_source}", flush=True)
+
+    from ..app.server import serve
+
+    def ready(app) -> None:
+        print(f"L2E Studio is running at {app.url}  (Ctrl+C to stop)", flush=True)
+        if args.host in ("127.0.0.1", "localhost", "::1"):
+            print(f"  remote machine? forward the port: ssh -L {args.port}:127.0.0.1:{args.port} <host>, "
+                  f"then open http://127.0.0.1:{args.port}", flush=True)
+
+    try:
+        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
+    except OSError as exc:
+        raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
+    return 0
