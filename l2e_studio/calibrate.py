@@ -32,10 +32,12 @@ GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
 
 @dataclass(frozen=True)
 class Stage:
-    """One pass of the optimiser: map smoothing ``sigma`` (px), every ``step``-th point."""
+    """One pass of the optimiser: map smoothing ``sigma`` (full-resolution px), every
+    ``step``-th point, maps resized by ``scale`` (coarse stages need no full resolution)."""
 
     sigma: float
     step: int = 1
+    scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,7 @@ class CalibrationSettings:
             return self.stages
         if not self.coarse_to_fine:
             return (Stage(self.sigma, 1),)
-        return (Stage(4 * self.sigma, 8), Stage(2 * self.sigma, 3), Stage(self.sigma, 1))
+        return (Stage(4 * self.sigma, 8, 0.25), Stage(2 * self.sigma, 3, 0.5), Stage(self.sigma, 1, 1.0))
 
 
 @dataclass(frozen=True)
@@ -140,7 +142,7 @@ def calibrate(
     cancelled = False
     message = ""
     for k, stage in enumerate(stages):
-        obj = stack.with_sigma(stage.sigma).subsample(stage.step).objective(seed, start=current)
+        obj = stack.with_sigma(stage.sigma, stage.scale).subsample(stage.step).objective(seed, start=current)
         tracker = _Tracker(obj, scale, free, k, len(stages), settings.max_iterations, on_progress, cancel, t0, count, history)
         try:
             res = _run_stage(obj, tracker, settings)

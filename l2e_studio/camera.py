@@ -59,7 +59,8 @@ class CameraModel:
         return bool(np.any(self.D != 0))
 
     def scaled(self, factor: float) -> "CameraModel":
-        """The same camera for an image resized by ``factor`` (used for previews)."""
+        """The same camera for the image resized by ``factor`` (``cv2.resize`` pixel centres)."""
         K = self.K.copy()
-        K[:2] *= factor
+        K[:2, :2] *= factor
+        K[:2, 2] = (K[:2, 2] + 0.5) * factor - 0.5
         return CameraModel(K, round(self.width * factor), round(self.height * factor), self.D, self.model)

@@ -54,7 +54,9 @@ class SceneStack:
     maps: np.ndarray  # (S, H+2, W+2) float32, prepared maps with a one-pixel zero border
     map_kinds: tuple[str, ...]
     raw_maps: tuple[np.ndarray, ...]  # the unprepared maps, for re-smoothing
-    sigma: float
+    sigma: float  # map smoothing in full-resolution pixels
+    scale: float = 1.0  # maps (and ``camera``) are the full-resolution ones resized by this
+    full_camera: CameraModel | None = None
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -97,13 +99,18 @@ class SceneStack:
             map_kinds=kinds,
             raw_maps=raw,
             sigma=float(sigma),
+            full_camera=camera,
         )
 
-    def with_sigma(self, sigma: float) -> "SceneStack":
-        """The same points over maps smoothed with another sigma."""
-        if sigma == self.sigma:
+    def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
+        """The same points over maps smoothed with another sigma (full-resolution pixels),
+        optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages."""
+        if sigma == self.sigma and scale == self.scale:
             return self
-        return replace(self, maps=_stack_maps(self.raw_maps, self.map_kinds, sigma), sigma=float(sigma))
+        full = self.full_camera or self.camera
+        camera = full if scale == 1.0 else full.scaled(scale)
+        maps = _stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height))
+        return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
 
     def select(self, mask: np.ndarray) -> "SceneStack":
         """Keep the points where ``mask`` is true (the maps are shared, not copied)."""
@@ -183,7 +190,13 @@ class SmoothObjective:
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
     The Silverman widths are fixed when the objective is made (at ``start``) so that the
     value and the gradient describe one and the same smooth function.
+
+    Points are processed in cache-sized chunks. The four map values around each projected
+    point come from a single gather: the map is packed as four 16-bit fixed-point neighbours
+    (1/256 of a count) per pixel.
     """
+
+    CHUNK = 65536
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
         if stack.n_points == 0:
@@ -192,15 +205,13 @@ class SmoothObjective:
         self.base = base
         dt, dw = base.delta_to(base if start is None else start)
         self.start = np.concatenate([dt, dw])  # ``start`` as a correction of ``base``
-        self._R0 = base.R
-        cam = stack.camera
-        self._wp = stack.maps.shape[2]
-        self._hp = stack.maps.shape[1]
-        self._flat_maps = stack.maps.reshape(-1)
-        self._scene_base = stack.scene_of.astype(np.int64) * (self._hp * self._wp)
-        self._l_offset = stack.l_bins.astype(np.int64) * N_BINS
-        self._e_max = CLIP["image"] - 1e-3
-        self._K = cam.K.astype(np.float32)
+        S, Hp, Wp = stack.maps.shape
+        self._qw = Wp - 1  # row length of the packed map
+        self._qh = Hp - 1
+        self._quads = _pack_quads(stack.maps)
+        self._scene_base = (stack.scene_of * (self._qh * self._qw)).astype(np.int32)
+        self._l_offset = (stack.l_bins * N_BINS).astype(np.int32)
+        self._K = stack.camera.K.astype(np.float32)
         self.n = float(stack.n_points)
         hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
         self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
@@ -208,8 +219,7 @@ class SmoothObjective:
         self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
         self._A_l = kernel_matrix(self.h_l)
         self._A_e = kernel_matrix(self.h_e)
-        p_l = self._A_l @ (hist_l / self.n)
-        self._H_l = entropy(p_l)
+        self._H_l = entropy(self._A_l @ (hist_l / self.n))
         self.evaluations = 0
 
     def extrinsic(self, delta: np.ndarray) -> Extrinsic:
@@ -224,101 +234,93 @@ class SmoothObjective:
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
         """MI and its gradient with respect to ``delta``."""
         delta = np.asarray(delta, dtype=np.float64)
-        e, aux = self._sample(delta, jacobian=True)
+        e, de_ddelta = self._sample(delta, jacobian=True)
         self.evaluations += 1
         mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
-        # d MI / d e_i: the soft bin moves weight from bin b to b + 1 as e grows
-        b = np.minimum(e, self._e_max).astype(np.int64)
-        j = self._l_offset + b
+        # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
+        j = self._l_offset + e.astype(np.int32)
         dmi_de = (W[j + 1] - W[j]).astype(np.float32)
-        de_du, de_dv, J, Q = aux
-        gu = dmi_de * de_du
-        gv = dmi_de * de_dv
-        gX = gu * J[0] + gv * J[3]
-        gY = gu * J[1] + gv * J[4]
-        gZ = gu * J[2] + gv * J[5]
-        grad_t = np.array([gX.sum(dtype=np.float64), gY.sum(dtype=np.float64), gZ.sum(dtype=np.float64)])
-        qxg = np.array(
-            [
-                np.dot(Q[1], gZ) - np.dot(Q[2], gY),
-                np.dot(Q[2], gX) - np.dot(Q[0], gZ),
-                np.dot(Q[0], gY) - np.dot(Q[1], gX),
-            ],
-            dtype=np.float64,
-        )
-        grad_w = left_jacobian(delta[3:]).T @ qxg
-        return mi, np.concatenate([grad_t, grad_w])
+        g = (de_ddelta @ dmi_de).astype(np.float64)
+        g[3:] = left_jacobian(delta[3:]).T @ g[3:]
+        return mi, g
 
     # --- internals -----------------------------------------------------------------------
-    def _sample(self, delta: np.ndarray, jacobian: bool):
-        """Bilinear map values at the projected points (and what the gradient needs)."""
-        delta = np.asarray(delta, dtype=np.float64)
-        ext = self.extrinsic(delta)
-        Q = (ext.R.astype(np.float32) @ self.stack.points)  # rotated points (3, N)
+    def _sample(self, delta: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """Bilinear map values e (N,) at the projected points and, with ``jacobian``, de/d(delta)
+        as (6, N) (its rotation rows still to be multiplied by the left Jacobian's transpose)."""
+        ext = self.extrinsic(np.asarray(delta, dtype=np.float64))
+        R = ext.R.astype(np.float32)
         t = ext.translation.astype(np.float32)
-        X, Y, Z = Q[0] + t[0], Q[1] + t[1], Q[2] + t[2]
+        n = self.stack.n_points
+        e = np.empty(n, dtype=np.float32)
+        d = np.empty((6, n), dtype=np.float32) if jacobian else None
+        for a in range(0, n, self.CHUNK):
+            b = min(a + self.CHUNK, n)
+            self._sample_chunk(R, t, a, b, e, d)
+        np.minimum(e, E_MAX, out=e)
+        return e, d
+
+    def _sample_chunk(self, R, t, a, b, e_out, d_out) -> None:
+        P = self.stack.points[:, a:b]
+        Q = R @ P  # rotated points
+        Z = Q[2] + t[2]
         front = Z > MIN_DEPTH
-        inv_z = 1.0 / np.maximum(Z, MIN_DEPTH)
-        x = X * inv_z
-        y = Y * inv_z
+        inv_z = 1.0 / np.maximum(Z, np.float32(MIN_DEPTH))
+        x = (Q[0] + t[0]) * inv_z
+        y = (Q[1] + t[1]) * inv_z
         cam = self.stack.camera
-        xd, yd, Jd = _distort(x, y, cam, jacobian)
+        xd, yd, Jd = _distort(x, y, cam, d_out is not None)
         K = self._K
-        # padded-map coordinates: pixel (0, 0) of the map is (1, 1) of the padded map
-        u = K[0, 0] * xd + K[0, 1] * yd + (K[0, 2] + 1.0)
+        # packed-map coordinates: map pixel (0, 0) sits at (1, 1) of the zero-padded map
+        u = K[0, 0] * xd + (K[0, 2] + 1.0)
+        if K[0, 1] != 0:
+            u += K[0, 1] * yd
         v = K[1, 1] * yd + (K[1, 2] + 1.0)
-        u_max = np.float32(self._wp - 1 - 1e-3)
-        v_max = np.float32(self._hp - 1 - 1e-3)
+        u_max = np.float32(self._qw - 1e-3)
+        v_max = np.float32(self._qh - 1e-3)
         uc = np.clip(u, 0.0, u_max)
         vc = np.clip(v, 0.0, v_max)
         uc[~front] = 0.0
-        vc[~front] = 0.0
-        ui = uc.astype(np.int64)
-        vi = vc.astype(np.int64)
-        fu = uc - ui
-        fv = vc - vi
-        idx = self._scene_base + vi * self._wp + ui
-        m = self._flat_maps
-        m00 = m[idx]
-        m01 = m[idx + 1]
-        m10 = m[idx + self._wp]
-        m11 = m[idx + self._wp + 1]
+        uf = np.floor(uc)
+        vf = np.floor(vc)
+        fu = uc - uf
+        fv = vc - vf
+        idx = self._scene_base[a:b] + vf.astype(np.int32) * np.int32(self._qw) + uf.astype(np.int32)
+        q = self._quads.take(idx).view(np.uint16).reshape(-1, 4)
+        m00, m01, m10, m11 = (q[:, k].astype(np.float32) for k in range(4))
         top = m00 + fu * (m01 - m00)
         bot = m10 + fu * (m11 - m10)
-        e = top + fv * (bot - top)
-        if not jacobian:
-            return e, None
-        inside_u = (u > 0.0) & (u < u_max) & front
-        inside_v = (v > 0.0) & (v < v_max) & front
-        de_du = np.where(inside_u, (m01 - m00) + fv * ((m11 - m10) - (m01 - m00)), 0.0).astype(np.float32)
-        de_dv = np.where(inside_v, bot - top, 0.0).astype(np.float32)
+        e_out[a:b] = (top + fv * (bot - top)) * np.float32(1.0 / QUANT)
+        if d_out is None:
+            return
+        # de/du, de/dv of the bilinear patch (zero where the point was clamped to the border)
+        de_du = ((m01 - m00) + fv * ((m11 - m10) - (m01 - m00))) * np.float32(1.0 / QUANT)
+        de_dv = (bot - top) * np.float32(1.0 / QUANT)
+        de_du[(u <= 0.0) | (u >= u_max) | ~front] = 0.0
+        de_dv[(v <= 0.0) | (v >= v_max) | ~front] = 0.0
         dxd_dx, dxd_dy, dyd_dx, dyd_dy = Jd
-        fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
-        du_dx = fx * dxd_dx + s * dyd_dx
-        du_dy = fx * dxd_dy + s * dyd_dy
-        dv_dx = fy * dyd_dx
-        dv_dy = fy * dyd_dy
-        # d(u, v)/d(X, Y, Z) as six arrays (row-major 2x3)
-        J = (
-            du_dx * inv_z,
-            du_dy * inv_z,
-            -(du_dx * x + du_dy * y) * inv_z,
-            dv_dx * inv_z,
-            dv_dy * inv_z,
-            -(dv_dx * x + dv_dy * y) * inv_z,
-        )
-        return e, (de_du, de_dv, J, Q)
+        # chain through d(u, v)/d(x, y) and d(x, y)/d(X, Y, Z)
+        gx = de_du * (K[0, 0] * dxd_dx + K[0, 1] * dyd_dx) + de_dv * (K[1, 1] * dyd_dx)
+        gy = de_du * (K[0, 0] * dxd_dy + K[0, 1] * dyd_dy) + de_dv * (K[1, 1] * dyd_dy)
+        gX = gx * inv_z
+        gY = gy * inv_z
+        gZ = -(gx * x + gy * y) * inv_z
+        out = d_out[:, a:b]
+        out[0], out[1], out[2] = gX, gY, gZ
+        # rotation: d X_cam / d dw = -[Q]x J_l(dw), so de/d(dw) = J_l^T (Q x g)
+        out[3] = Q[1] * gZ - Q[2] * gY
+        out[4] = Q[2] * gX - Q[0] * gZ
+        out[5] = Q[0] * gY - Q[1] * gX
 
     def _soft_histogram(self, e: np.ndarray) -> np.ndarray:
         """(256, 256) joint histogram with E linearly split between its two nearest bins."""
-        e = np.minimum(e, self._e_max)
-        b = e.astype(np.int64)
+        b = e.astype(np.int32)
         frac = e - b
         j = self._l_offset + b
         size = N_BINS * N_BINS
-        h = np.bincount(j, weights=1.0 - frac, minlength=size)
-        h += np.bincount(j + 1, weights=frac, minlength=size)[:size]
-        return h.reshape(N_BINS, N_BINS)
+        h = np.bincount(j, weights=1.0 - frac, minlength=size + 1)
+        h[1:] += np.bincount(j, weights=frac, minlength=size + 1)[:-1]
+        return h[:size].reshape(N_BINS, N_BINS)
 
     def _mi_and_weights(self, joint: np.ndarray, need_weights: bool):
         n = self.n
@@ -332,7 +334,24 @@ class SmoothObjective:
         g_le = -(np.log(np.maximum(p_le, tiny)) + 1.0)  # dH/dp
         g_e = -(np.log(np.maximum(p_e, tiny)) + 1.0)
         W = ((A_e.T @ g_e)[None, :] - A_l.T @ g_le @ A_e) / n
-        return mi, W.reshape(-1)
+        return mi, np.append(W.reshape(-1), 0.0)
+
+
+QUANT = 256.0  # fixed-point steps per count in the packed map
+E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
+
+
+def _pack_quads(maps: np.ndarray) -> np.ndarray:
+    """(S, H+2, W+2) padded maps -> (S*(H+1)*(W+1),) uint64: the 2x2 neighbourhood of each pixel
+    as four uint16 fixed-point values (top-left, top-right, bottom-left, bottom-right)."""
+    q = np.rint(np.clip(maps, 0, CLIP["image"]) * QUANT).astype(np.uint16)
+    S, Hp, Wp = q.shape
+    packed = np.empty((S, Hp - 1, Wp - 1, 4), dtype=np.uint16)
+    packed[..., 0] = q[:, :-1, :-1]
+    packed[..., 1] = q[:, :-1, 1:]
+    packed[..., 2] = q[:, 1:, :-1]
+    packed[..., 3] = q[:, 1:, 1:]
+    return packed.view(np.uint64).reshape(-1)
 
 
 def _transform(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -340,11 +359,19 @@ def _transform(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
     return R.astype(np.float32) @ points + t.astype(np.float32)[:, None]
 
 
-def _stack_maps(raw: Sequence[np.ndarray], kinds: Sequence[str], sigma: float) -> np.ndarray:
+def _stack_maps(
+    raw: Sequence[np.ndarray], kinds: Sequence[str], sigma: float, size: tuple[int, int] | None = None
+) -> np.ndarray:
+    """Prepared maps, one-pixel zero border; resized to ``size`` (w, h) before smoothing."""
     h, w = raw[0].shape
-    out = np.zeros((len(raw), h + 2, w + 2), dtype=np.float32)
+    out_w, out_h = size or (w, h)
+    factor = out_w / w
+    out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
     for i, (m, kind) in enumerate(zip(raw, kinds)):
-        out[i, 1:-1, 1:-1] = prepare_map(m, sigma, CLIP[kind])
+        m = np.clip(m, 0.0, CLIP[kind])
+        if (out_w, out_h) != (w, h):
+            m = cv2.resize(m, (out_w, out_h), interpolation=cv2.INTER_AREA)
+        out[i, 1:-1, 1:-1] = prepare_map(m, sigma * factor, CLIP[kind])
     return out
 
 
