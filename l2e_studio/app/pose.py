@@ -54,3 +54,12 @@ def sliders_from_extrinsic(
 def _wrap_near(angles: np.ndarray, near: np.ndarray) -> np.ndarray:
     """Add multiples of 360 deg so each angle is within 180 deg of ``near``."""
     return near + (angles - near + 180.0) % 360.0 - 180.0
+
+
+def describe(extrinsic: Extrinsic, reference: Extrinsic) -> str:
+    """One line in the sliders' terms: translation, and the rotation correction to ``reference``."""
+    v = sliders_from_extrinsic(extrinsic, reference)
+    return (
+        f"x, y, z = ({v[0]:.4f}, {v[1]:.4f}, {v[2]:.4f}) m · "
+        f"roll, pitch, yaw = ({v[3]:+.3f}, {v[4]:+.3f}, {v[5]:+.3f})° vs file seed"
+    )

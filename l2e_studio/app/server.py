@@ -211,6 +211,7 @@ class App:
         self.optimise.show_running(False)
         self.results.show(snap)
         self.overlay_worker.poke()
+        self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
         run = snap.run
         if run.status == "failed":
@@ -242,6 +243,7 @@ class App:
         self.state.discard_result()
         self.results.show(self.state.snapshot())
         self.compare_worker.poke()
+        self.mi_worker.poke()
 
     # --- notifications --------------------------------------------------------------------------------
     def notify(self, client: Any, title: str, body: str, color: str | None = None) -> None:

@@ -11,7 +11,7 @@ import viser
 from ...errors import InputError
 from ...geometry import Extrinsic
 from ..files import save_seed, seed_document, seed_from_upload
-from ..pose import SLIDER_NAMES, extrinsic_from_sliders, sliders_from_extrinsic
+from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_extrinsic
 from ..readout import MiReading
 from ..state import Snapshot
 
@@ -112,13 +112,11 @@ class ExtrinsicPanel:
             s.value = float(v)
 
     def show_pose_text(self, extrinsic: Extrinsic) -> None:
-        t = extrinsic.translation
-        rpy = extrinsic.rpy()
         err_deg, err_m = self.reference.error_to(extrinsic)
         self.pose_text.content = (
-            f"T_cam_lidar: t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m · "
-            f"rpy = ({rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f})° · "
-            f"{err_deg:.2f}° / {100 * err_m:.1f} cm from the file seed"
+            f"{describe(extrinsic, self.reference)}  \n"
+            f"{err_deg:.3f}° / {100 * err_m:.2f} cm from the file seed · "
+            f"rotvec = ({', '.join(f'{a:.5f}' for a in extrinsic.rotvec)}) rad"
         )
 
     def show_mi(self, reading: MiReading, snap: Snapshot, reference_mi: float) -> None:

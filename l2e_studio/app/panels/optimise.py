@@ -14,6 +14,7 @@ import viser
 import viser.uplot
 
 from ...calibrate import METHODS, CalibrationSettings
+from ..pose import describe
 from ..state import RunState
 
 if TYPE_CHECKING:
@@ -45,8 +46,10 @@ class OptimisePanel:
                                        hint="While running, draw the optimiser's best estimate in the overlay")
         self.progress = gui.add_progress_bar(0.0, animated=False)
         self.status = gui.add_markdown(IDLE_TEXT)
+        # viser 1.1's client never redraws a uPlot created with empty data, so the plot starts
+        # with one placeholder point and stays hidden until a run has history.
         self.plot = gui.add_uplot(
-            (np.zeros(0), np.zeros(0), np.zeros(0)),
+            (np.zeros(1), np.zeros(1), np.zeros(1)),
             (
                 viser.uplot.Series(label="evaluation"),
                 viser.uplot.Series(label="MI", stroke="#1c7ed6", width=1),
@@ -55,6 +58,7 @@ class OptimisePanel:
             title="MI vs evaluation",
             scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True)},
             aspect=1.6,
+            visible=False,
         )
         self.best_text = gui.add_markdown("")
         self.start.on_click(self._on_start)
@@ -93,8 +97,7 @@ class OptimisePanel:
         if run.history:
             h = np.asarray(run.history, dtype=np.float64)
             self.plot.data = (h[:, 0], h[:, 1], h[:, 2])
-        else:
-            self.plot.data = (np.zeros(0), np.zeros(0), np.zeros(0))
+            self.plot.visible = True
         elapsed = (run.finished or time.time()) - run.started if run.started else 0.0
         stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
         words = {"running": "Running", "done": "Finished", "cancelled": "Cancelled", "failed": "Failed", "idle": "Idle"}
@@ -104,8 +107,4 @@ class OptimisePanel:
             text += f"  \n{run.error}"
         self.status.content = text
         if run.best is not None:
-            t, rpy = run.best.translation, run.best.rpy()
-            self.best_text.content = (
-                f"Best so far: t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m · "
-                f"rpy = ({rpy[0]:.2f}, {rpy[1]:.2f}, {rpy[2]:.2f})°"
-            )
+            self.best_text.content = f"Best so far: {describe(run.best, self.app.state.reference)}"

@@ -79,7 +79,9 @@ class OverlayPanel:
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]
         mi = "" if reading is None else f" · MI {reading.per_scene[snap.selected]:.4f}"
-        following = ""
+        note = ""
         if snap.run.active and snap.follow_best:
-            following = " · showing the optimiser's best estimate"
-        self.caption.content = f"**{name}**{mi}{following}"
+            note = " · showing the optimiser's best estimate"
+        elif snap.result is not None and not np.allclose(snap.result.extrinsic.params, snap.extrinsic.params):
+            note = " · a result is waiting: compare it in Before / after, accept it in Result"
+        self.caption.content = f"**{name}**{mi}{note}"

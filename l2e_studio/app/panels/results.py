@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import viser
 
 from ...errors import InputError
+from ..pose import describe
 from ..state import Snapshot
 
 if TYPE_CHECKING:
@@ -59,14 +60,13 @@ class ResultPanel:
             self.table.content = ""
             return
         err_deg, err_m = r.seed.error_to(r.extrinsic)
-        t, rpy = r.extrinsic.translation, r.extrinsic.rpy()
         state = "cancelled (best point so far)" if r.cancelled else "finished"
         self.summary.content = (
             f"**Run {state}** · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
             f"**MI {r.mi_seed:.4f} → {r.mi_result:.4f}** ({r.mi_result - r.mi_seed:+.4f}) over "
             f"{len(r.scene_names)} scenes  \n"
             f"moved {err_deg:.3f}° / {100 * err_m:.2f} cm from its seed  \n"
-            f"t = ({t[0]:.4f}, {t[1]:.4f}, {t[2]:.4f}) m · rpy = ({rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f})°"
+            f"{describe(r.extrinsic, self.app.state.reference)}"
         )
         rows = ["| scene | MI seed | MI result | Δ |", "|:--|--:|--:|--:|"]
         for name, a, b in zip(r.scene_names, r.mi_seed_per_scene, r.mi_result_per_scene):

@@ -1,0 +1,75 @@
+"""Helpers for the workbench tests: small synthetic scene folders, a running app on a free
+port, and a headless Chromium driven by Playwright (Debian's /usr/bin/chromium, never a
+downloaded browser). Imported by ``tests/test_app_*.py``."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import time
+from pathlib import Path
+from typing import Callable
+
+import pytest
+
+CHROMIUM = Path(os.environ.get("L2E_CHROMIUM", "/usr/bin/chromium"))
+CHROMIUM_ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]
+ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts" / "app"
+VIEWPORT = {"width": 1600, "height": 900}
+
+#: Small scenes: fast to load and to optimise, big enough for a meaningful MI.
+SMALL = dict(n_scenes=4, width=320, height=180, points_per_scan=5000, seed=3)
+
+
+def write_small_scenes(folder: Path, **changes) -> Path:
+    """A synthetic scene folder (event/, lidar/, camera.yaml, truth.yaml)."""
+    from l2e_studio.synth import SynthConfig, write_dataset
+
+    return write_dataset(folder, SynthConfig(**{**SMALL, **changes}))
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(condition: Callable[[], object], timeout: float = 20.0, interval: float = 0.02, what: str = "") -> object:
+    """Poll ``condition`` until it returns something truthy; fail the test on timeout."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what or condition}")
+        time.sleep(interval)
+
+
+def need_chromium() -> None:
+    if not CHROMIUM.is_file():
+        pytest.skip(f"{CHROMIUM} is absent: the browser tests need Debian's chromium (apt-get install chromium)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        pytest.skip("the python playwright package is not installed (pip install -e '.[test]')")
+
+
+def launch_browser(playwright, user_data_dir: Path):
+    """A fresh headless Chromium context (its own profile folder)."""
+    if user_data_dir.exists():
+        shutil.rmtree(user_data_dir)
+    return playwright.chromium.launch_persistent_context(
+        str(user_data_dir), executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True, viewport=VIEWPORT,
+    )
+
+
+def screenshot(page, name: str) -> Path:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path))
+    return path

@@ -1,0 +1,244 @@
+"""The workbench driven in a real browser: headless Chromium (Debian's) through Playwright.
+
+The app runs in-process on a free port over four small synthetic scenes; every test opens
+the page, works the controls as a person would and checks both what the page shows and the
+server's state. Screenshots land in ``test-artifacts/app/``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from app_fixtures import free_port, launch_browser, need_chromium, screenshot, wait_for, write_small_scenes
+from l2e_studio.app.pose import extrinsic_from_sliders
+from l2e_studio.io.cameras import load_seed
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(240)]
+
+
+# --- fixtures -------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def scene_set(tmp_path_factory):
+    from l2e_studio.scenes import load_scene_folder
+
+    return load_scene_folder(write_small_scenes(tmp_path_factory.mktemp("scenes") / "small"))
+
+
+@pytest.fixture
+def app(scene_set, tmp_path):
+    from l2e_studio.app.server import build_app
+
+    a = build_app(scene_set, host="127.0.0.1", port=free_port(), out_dir=tmp_path / "results")
+    yield a
+    a.stop()
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    need_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        context = launch_browser(pw, tmp_path_factory.mktemp("chromium") / "profile")
+        context.set_default_timeout(30_000)
+        yield context
+        context.close()
+
+
+@pytest.fixture
+def page(browser, app):
+    p = browser.new_page()
+    open_app(p, app)
+    yield p
+    p.close()
+
+
+# --- page helpers ----------------------------------------------------------------------------------
+
+def open_app(page, app) -> None:
+    page.goto(app.url)
+    page.get_by_text("Use in optimisation").wait_for()
+    page.locator("img[src^='blob:']").first.wait_for()
+
+
+def overlay_digest(page) -> str:
+    """SHA-256 of the JPEG bytes the overlay image currently shows."""
+    return page.evaluate(
+        """async () => {
+            const img = document.querySelector("img[src^='blob:']");
+            const buf = await (await fetch(img.src)).arrayBuffer();
+            const d = await crypto.subtle.digest("SHA-256", buf);
+            return Array.from(new Uint8Array(d)).map(b => b.toString(16).padStart(2, "0")).join("");
+        }"""
+    )
+
+
+def labelled(page, label: str):
+    """The input element viser labels with ``label`` (a slider root, a select box ...)."""
+    element_id = page.locator("label", has_text=label).first.get_attribute("for")
+    return page.locator(f"[id='{element_id}']")
+
+
+slider_root = labelled
+
+
+def number_field(page, label: str):
+    """The number box next to a slider (or a plain number input) with this label."""
+    return slider_root(page, label).locator("xpath=..").locator("input.mantine-NumberInput-input")
+
+
+def readout(page) -> str:
+    return page.get_by_text("included scenes:").inner_text()
+
+
+def open_tab(page, name: str) -> None:
+    page.get_by_role("tab", name=name).click()
+
+
+# --- the tests -------------------------------------------------------------------------------------
+
+def test_page_loads_with_panels_overlay_and_scene_list(page, app):
+    for tab in ("Overlay", "Before / after", "Scenes", "Seed", "Optimise", "Result"):
+        assert page.get_by_role("tab", name=tab).is_visible()
+    assert page.get_by_text("L2E Studio").first.is_visible()
+    for name in app.state.scene_names:
+        assert page.get_by_role("cell", name=name).first.is_visible()
+    # the overlay shows a full-size map of the selected scene, and the MI column is filled in
+    size = page.evaluate("() => { const i = document.querySelector(\"img[src^='blob:']\"); return [i.naturalWidth, i.naturalHeight]; }")
+    assert size == [app.camera.width, app.camera.height]
+    wait_for(lambda: app.reading is not None, what="the first MI reading")
+    first_mi = f"{app.reading.per_scene[0]:.4f}"
+    page.get_by_role("cell", name=first_mi).first.wait_for()
+    screenshot(page, "01_loaded")
+
+
+def test_slider_move_changes_overlay_and_mi_readout(page, app):
+    open_tab(page, "Seed")
+    page.get_by_text("included scenes:").wait_for()
+    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.frames >= 1)
+    text0, digest0 = readout(page), overlay_digest(page)
+    frames0 = app.overlay.frames
+
+    thumb = slider_root(page, "yaw (°)").get_by_role("slider")
+    thumb.focus()
+    for _ in range(5):  # five keyboard steps of 0.1 deg ("fine" step)
+        page.keyboard.press("ArrowRight")
+    wait_for(lambda: abs(app.extrinsic.sliders[5].value - 0.5) < 1e-6, what="yaw slider at 0.5 deg on the server")
+    values = np.array([s.value for s in app.extrinsic.sliders])
+    expected = extrinsic_from_sliders(values, app.state.reference)
+    wait_for(lambda: np.allclose(app.state.snapshot().extrinsic.params, expected.params), what="state follows the sliders")
+    wait_for(lambda: readout(page) != text0, what="the MI readout to change in the page")
+    wait_for(lambda: overlay_digest(page) != digest0, what="a new overlay image in the page")
+    assert app.overlay.frames > frames0
+
+    # typing into the number field of x moves the translation
+    x_new = round(float(app.state.reference.translation[0]) + 0.02, 3)  # the field shows 3 decimals
+    field = number_field(page, "x (m)")
+    field.fill(str(x_new))
+    field.press("Enter")
+    wait_for(lambda: abs(app.state.snapshot().extrinsic.translation[0] - x_new) < 1e-9, what="x typed in")
+    screenshot(page, "02_slider_moved")
+
+
+def test_optimisation_runs_to_completion_and_saves(page, app):
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    wait_for(lambda: app.state.snapshot().run.status != "idle", what="the run to start")
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    snap = app.state.snapshot()
+    r = snap.result
+    assert snap.run.status == "done" and not r.cancelled
+    assert r.mi_result > r.mi_seed
+    # the MI curve: data on the server, a drawn uPlot in the page
+    assert len(snap.run.history) == r.evaluations > 1
+    wait_for(lambda: len(app.optimise.plot.data[0]) == len(snap.run.history), what="the curve's data")
+    assert app.optimise.plot.visible
+    assert page.locator(".uplot canvas").first.is_visible()
+    screenshot(page, "03_optimised")
+
+    open_tab(page, "Result")
+    page.get_by_text(f"{r.mi_result:.4f}").first.wait_for()
+    page.get_by_role("button", name="Save result").click()
+    page.get_by_text("Result saved").first.wait_for()
+    saved = sorted((app.out_dir).glob("l2e_result_*.yaml"))
+    assert len(saved) == 1
+    doc = yaml.safe_load(saved[0].read_text())
+    assert np.allclose(doc["T_cam_lidar"], r.extrinsic.matrix, atol=1e-9)
+    assert doc["mi"]["result"] == pytest.approx(r.mi_result)
+    assert doc["scenes"] == list(app.state.scene_names)
+    assert np.allclose(load_seed(saved[0]).params, r.extrinsic.params, atol=1e-8)
+    png = cv2.imread(str(saved[0].with_name(saved[0].stem + "_before_after.png")))
+    assert png is not None and png.shape == (app.camera.height, 2 * app.camera.width, 3)
+    # saving again never replaces the first file
+    first = saved[0].read_bytes()
+    page.get_by_role("button", name="Save result").click()
+    wait_for(lambda: len(list(app.out_dir.glob("l2e_result_*.yaml"))) == 2, what="a second result file")
+    assert saved[0].read_bytes() == first
+
+    open_tab(page, "Before / after")
+    wait_for(lambda: app.compare.frames >= 1, what="the before/after image")
+    page.get_by_text("(seed) ->").first.wait_for()
+    screenshot(page, "04_before_after")
+
+    open_tab(page, "Result")
+    page.get_by_role("button", name="Accept as seed").click()
+    wait_for(lambda: np.allclose(app.state.snapshot().extrinsic.params, r.extrinsic.params), what="accepted result")
+
+
+def test_cancel_stops_a_run_within_a_second(page, app):
+    app.optimise.method.value = "Nelder-Mead"  # the slowest optimiser: a run long enough to cancel
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
+    assert app.state.snapshot().run.status == "running"
+    t0 = time.monotonic()
+    page.get_by_role("button", name="Cancel").click()
+    wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
+    seconds = time.monotonic() - t0
+    assert seconds < 1.0, f"cancel took {seconds:.2f} s"
+    assert app.state.snapshot().result.cancelled
+    page.get_by_text("Cancelled").first.wait_for()
+    assert page.get_by_role("button", name="Start").is_enabled()
+    screenshot(page, "05_cancelled")
+
+
+def test_two_tabs_share_state_and_a_closed_tab_loses_nothing(browser, app):
+    a, b = browser.new_page(), browser.new_page()
+    try:
+        open_app(a, app)
+        open_app(b, app)
+        open_tab(a, "Seed")
+        open_tab(b, "Seed")
+        field = number_field(a, "yaw (°)")
+        field.fill("1.5")
+        field.press("Enter")
+        wait_for(lambda: number_field(b, "yaw (°)").input_value() == "1.5", what="tab B's yaw field")
+        wait_for(lambda: app.mi_worker.wait_idle(5) and readout(a) == readout(b), what="the same readout in both")
+
+        open_tab(a, "Scenes")
+        open_tab(b, "Scenes")
+        labelled(a, "Scene").click()
+        a.get_by_role("option", name="scene_002").click()
+        wait_for(lambda: app.state.snapshot().selected == 2, what="scene_002 selected")
+        wait_for(lambda: labelled(b, "Scene").input_value() == "scene_002", what="tab B's scene")
+        b.get_by_text("scene_002 · MI").first.wait_for()
+
+        # a run started in one tab finishes while that tab is gone, and the other sees it
+        open_tab(a, "Optimise")
+        a.get_by_role("button", name="Start").click()
+        wait_for(lambda: app.state.snapshot().run.status == "running", what="the run to start")
+        a.close()
+        open_tab(b, "Optimise")
+        b.get_by_text("Finished").first.wait_for(timeout=120_000)
+        assert app.state.snapshot().result is not None
+        screenshot(b, "06_second_tab")
+    finally:
+        for p in (a, b):
+            if not p.is_closed():
+                p.close()
