@@ -132,7 +132,7 @@ def disc_offsets(size: int) -> tuple[np.ndarray, np.ndarray]:
     hi = int(np.ceil(r))
     ys, xs = np.mgrid[lo : hi + 1, lo : hi + 1]
     cy = cx = (lo + hi) / 2.0
-    keep = (ys - cy) ** 2 + (xs - cx) ** 2 <= (r + 0.35) ** 2 if size > 2 else np.ones_like(ys, bool)
+    keep = (ys - cy) ** 2 + (xs - cx) ** 2 <= (r + 0.5) ** 2 if size > 2 else np.ones_like(ys, bool)
     return ys[keep].astype(np.int32), xs[keep].astype(np.int32)
 
 

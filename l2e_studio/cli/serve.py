@@ -29,9 +29,9 @@ def run(args: argparse.Namespace) -> int:
     from ..samples import sample_scenes_dir
     from ..scenes import load_scene_folder
 
-    folder = args.scenes if args.scenes is not None else sample_scenes_dir()
     if not 0 < args.port < 65536:
         raise InputError(None, f"--port must be 1..65535, got {args.port}")
+    folder = args.scenes if args.scenes is not None else sample_scenes_dir()
     print(f"Loading scenes from {folder} ...", flush=True)
     scene_set = load_scene_folder(folder, seed_file=args.seed, camera_file=args.camera)
     for failure in scene_set.failures:

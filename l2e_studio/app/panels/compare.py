@@ -25,7 +25,8 @@ class ComparePanel:
         cam = app.camera
         with overlay.compare_tab:
             self.caption = gui.add_markdown(NO_RESULT)
-            self.image = gui.add_image(np.zeros((cam.height // 2, cam.width, 3), np.uint8), format="jpeg", jpeg_quality=85)
+            self.image = gui.add_image(np.zeros((cam.height // 2, cam.width, 3), np.uint8), format="jpeg",
+                                       jpeg_quality=85, visible=False)
             self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="side by side")
             self.amount = gui.add_slider("Swipe / blend", 0.0, 1.0, 0.01, 0.5,
                                          hint="Swipe: where the seed ends and the result begins; blend: share of the result")
@@ -48,6 +49,7 @@ class ComparePanel:
         img = self.compose(snap)
         if img is None:
             self.caption.content = NO_RESULT
+            self.image.visible = False
             return
         r = snap.result
         name = self.app.state.scene_names[snap.selected]
@@ -61,4 +63,5 @@ class ComparePanel:
             scores = f"held out of the optimisation; MI {mi_seed:.4f} (seed) -> {mi_res:.4f} (result)"
         self.caption.content = f"**{name}**: {scores}"
         self.image.image = img
+        self.image.visible = True
         self.frames += 1
