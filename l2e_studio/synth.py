@@ -56,6 +56,7 @@ class SynthConfig:
     seed: int = 0
     seed_error_deg: float = 2.0
     seed_error_m: float = 0.05
+    camera_offset_m: tuple[float, float] = (0.05, 0.15)  # range of the lidar-to-camera distance
     max_range_m: float = 80.0
     range_noise_m: float = 0.015
     intensity_noise: float = 2.0
@@ -67,6 +68,7 @@ class SynthConfig:
     hot_pixels: int = 300
     dead_pixels: int = 40
     checkerboard_fraction: float = 0.4  # share of scenes with calibration targets near the rig
+    falloff_exponent: float = 2.0  # spot light at the camera ~ 1 / distance**falloff_exponent
 
     def __post_init__(self) -> None:
         if self.n_scenes < 1 or self.width < 16 or self.height < 16 or self.points_per_scan < 100:
@@ -75,6 +77,8 @@ class SynthConfig:
             raise ValueError("fields of view out of range")
         if self.seed_error_deg < 0 or self.seed_error_m < 0:
             raise ValueError("seed errors must be >= 0")
+        if not 0 <= self.camera_offset_m[0] <= self.camera_offset_m[1]:
+            raise ValueError("camera_offset_m must be an increasing (min, max) pair of distances")
 
 
 #: The embedded sample (``assets/sample``): six small scenes.
@@ -95,7 +99,7 @@ def make_rig(config: SynthConfig) -> tuple[CameraModel, Extrinsic, Extrinsic]:
     mount = Rotation.from_euler("xyz", rng.uniform(-3, 3, 3), degrees=True).as_matrix()
     R = AXIS_SWAP @ mount  # camera axes from lidar axes, then a small mounting error
     offset = rng.normal(size=3)
-    offset *= rng.uniform(0.05, 0.15) / np.linalg.norm(offset)  # camera centre in the lidar frame
+    offset *= rng.uniform(*config.camera_offset_m) / np.linalg.norm(offset)  # camera centre in the lidar frame
     truth = Extrinsic(Rotation.from_matrix(R).as_rotvec(), -R @ offset)
     seed = perturb(truth, config.seed_error_deg, config.seed_error_m, rng)
     return camera, truth, seed
@@ -191,7 +195,7 @@ def _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng) -> n
     rho = surf.rho[idx]
     cos_c = np.abs(np.einsum("ij,ij->i", surf.normals[idx], view))
     gain = np.where(rho > 1.0, 12.0 * rho, rho)  # retro-reflectors shine back at the rig
-    light = gain * cos_c / dist**2 * rng.uniform(0.8, 1.25)  # per-scene contrast sensitivity
+    light = gain * cos_c / dist**config.falloff_exponent * rng.uniform(0.8, 1.25)  # per-scene contrast sensitivity
     u, v = uv[idx, 0], uv[idx, 1]
     iu, iv = np.round(u).astype(np.int64), np.round(v).astype(np.int64)
     off = np.arange(-pad, pad + 1)
