@@ -17,11 +17,14 @@ Two estimators live here:
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Sequence
 
 import cv2
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .camera import CameraModel
 from .geometry import Extrinsic, _distort, in_image, left_jacobian, project_points
@@ -163,6 +166,10 @@ class SceneStack:
 
     def mi(self, extrinsic: Extrinsic, per_scene: bool = True) -> tuple[float, np.ndarray]:
         """The paper's MI at ``extrinsic``: (all scenes pooled, per scene)."""
+        with single_threaded_blas():
+            return self._mi(extrinsic, per_scene)
+
+    def _mi(self, extrinsic: Extrinsic, per_scene: bool) -> tuple[float, np.ndarray]:
         joints = self.joint_histograms(extrinsic)
         total = mi_from_joint_histogram(joints.sum(axis=0))
         if not per_scene:
@@ -254,9 +261,13 @@ class SmoothObjective:
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
         d = np.empty((6, n), dtype=np.float32) if jacobian else None
-        for a in range(0, n, self.CHUNK):
-            b = min(a + self.CHUNK, n)
-            self._sample_chunk(R, t, a, b, e, d)
+        starts = range(0, n, self.CHUNK)
+        work = [(a, min(a + self.CHUNK, n)) for a in starts]
+        if WORKERS > 1 and len(work) > 1:
+            list(_pool().map(lambda ab: self._sample_chunk(R, t, ab[0], ab[1], e, d), work))
+        else:
+            for a, b in work:
+                self._sample_chunk(R, t, a, b, e, d)
         np.minimum(e, E_MAX, out=e)
         return e, d
 
@@ -338,6 +349,16 @@ class SmoothObjective:
 
 
 QUANT = 256.0  # fixed-point steps per count in the packed map
+#: Threads that evaluate chunks of points in parallel (numpy releases the GIL in its loops).
+WORKERS = int(os.environ.get("L2E_THREADS", min(4, os.cpu_count() or 1)))
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(WORKERS, thread_name_prefix="l2e-objective")
+    return _POOL
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
@@ -352,6 +373,16 @@ def _pack_quads(maps: np.ndarray) -> np.ndarray:
     packed[..., 2] = q[:, 1:, :-1]
     packed[..., 3] = q[:, 1:, 1:]
     return packed.view(np.uint64).reshape(-1)
+
+
+def single_threaded_blas():
+    """Context in which BLAS runs on one thread.
+
+    The matrix products here are small (3xN, 256x256). Multi-threaded OpenBLAS gains nothing on
+    them, and when the cores are busy (the web UI, other processes) its thread hand-offs made
+    each 256x256 product take tens of milliseconds instead of one.
+    """
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _transform(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -1,0 +1,129 @@
+"""Accuracy and speed of the calibration engine on synthetic full-size scenes (issue 2).
+
+    python benchmarks/bench_engine.py                     # 40 scenes, 40 perturbed-seed runs
+    python benchmarks/bench_engine.py --runs 5            # quicker
+    python benchmarks/bench_engine.py --scaling           # + cost versus scene count (5..80)
+    python benchmarks/bench_engine.py --cli               # + the whole `l2e-studio calibrate` process
+
+The synthetic dataset (the paper's sensors: 1280x720 event map, ~75k lidar points per scan) is
+written once to ``benchmarks/out/synth<N>`` and reused. Seeds follow the paper's protocol: the
+true extrinsic's translation and rotation vector each perturbed uniformly by up to 0.1 m and
+0.1 rad per axis. A run passes when it lands within 0.1 deg and 1 cm of the truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from l2e_studio.calibrate import CalibrationSettings, calibrate
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.objective import SceneStack
+from l2e_studio.scenes import load_scene_folder
+from l2e_studio.synth import SynthConfig, config_with, read_truth, write_dataset
+
+OUT = Path(__file__).resolve().parent / "out"
+
+
+def dataset(n: int) -> Path:
+    folder = OUT / f"synth{n}"
+    if not (folder / "truth.yaml").is_file():
+        t = time.perf_counter()
+        write_dataset(folder, config_with(SynthConfig(), n_scenes=n), overwrite=True)
+        print(f"wrote {n} synthetic scenes to {folder} in {time.perf_counter() - t:.1f} s")
+    return folder
+
+
+def timed(fn, repeat: int = 5) -> float:
+    fn()
+    t = time.perf_counter()
+    for _ in range(repeat):
+        fn()
+    return (time.perf_counter() - t) / repeat
+
+
+def perturbed_seed(truth: Extrinsic, rng: np.random.Generator) -> Extrinsic:
+    return Extrinsic(truth.rotvec + rng.uniform(-0.1, 0.1, 3), truth.translation + rng.uniform(-0.1, 0.1, 3))
+
+
+def load(folder: Path):
+    t = time.perf_counter()
+    scene_set = load_scene_folder(folder, use_cache=False)
+    cold = time.perf_counter() - t
+    load_scene_folder(folder)  # fills the cache
+    t = time.perf_counter()
+    scene_set = load_scene_folder(folder)
+    warm = time.perf_counter() - t
+    return scene_set, cold, warm
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", type=int, default=40)
+    ap.add_argument("--runs", type=int, default=40)
+    ap.add_argument("--method", default="SLSQP")
+    ap.add_argument("--scaling", action="store_true")
+    ap.add_argument("--cli", action="store_true")
+    args = ap.parse_args()
+
+    folder = dataset(args.scenes)
+    truth = read_truth(folder / "truth.yaml")
+    scene_set, cold, warm = load(folder)
+    print(f"load {args.scenes} scenes: {cold:.2f} s from text, {warm:.2f} s from the cache")
+
+    settings = CalibrationSettings(method=args.method)
+    t = time.perf_counter()
+    stack = SceneStack.build(scene_set.scenes, scene_set.camera, settings.sigma, scene_set.seed,
+                             2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+    print(f"stack: {stack.n_points} points that can reach the image, built in {time.perf_counter() - t:.2f} s")
+    print(f"one MI evaluation (paper estimator, all scenes pooled): {1000 * timed(lambda: stack.mi(truth, per_scene=False)):.1f} ms")
+    print(f"  with per-scene MI as well: {1000 * timed(lambda: stack.mi(truth)):.1f} ms")
+    obj = stack.objective(truth)
+    zero = np.zeros(6)
+    print(f"smooth objective over {obj.stack.n_points} points: value {1000 * timed(lambda: obj.value(zero)):.1f} ms, "
+          f"value+gradient {1000 * timed(lambda: obj.value_and_grad(zero)):.1f} ms")
+
+    rng = np.random.default_rng(2023)
+    rows = []
+    for i in range(args.runs):
+        seed = perturbed_seed(truth, rng)
+        res = calibrate(stack, None, seed, settings)
+        deg, m = res.extrinsic.error_to(truth)
+        ok = deg <= 0.1 and m <= 0.01
+        rows.append((deg, m, res.seconds, res.evaluations, ok))
+        sdeg, sm = seed.error_to(truth)
+        print(f"run {i:2d}: seed {sdeg:5.2f} deg {100 * sm:5.1f} cm -> {deg:.4f} deg {1000 * m:5.2f} mm  "
+              f"{res.evaluations:3d} evals {res.seconds:5.2f} s  {'ok' if ok else 'MISS'}", flush=True)
+    a = np.array([r[:4] for r in rows])
+    n_ok = sum(r[4] for r in rows)
+    print(f"\naccuracy: {n_ok}/{len(rows)} runs within 0.1 deg and 1 cm; rotation error median {np.median(a[:, 0]):.4f} "
+          f"max {a[:, 0].max():.4f} deg; translation error median {1000 * np.median(a[:, 1]):.2f} max {1000 * a[:, 1].max():.2f} mm")
+    print(f"optimisation wall time: median {np.median(a[:, 2]):.2f} s, max {a[:, 2].max():.2f} s; "
+          f"evaluations median {np.median(a[:, 3]):.0f}")
+    print(f"peak memory (max RSS) so far: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+    if args.scaling:
+        print("\nscenes  points  eval_ms  optimisation_s")
+        for n in (5, 10, 20, 40, 80):
+            sub = load_scene_folder(dataset(max(n, args.scenes)) if n > args.scenes else folder)
+            st = SceneStack.build(sub.scenes[:n], sub.camera, settings.sigma, sub.seed, 0.4, 20.0)
+            ev = timed(lambda: st.mi(truth, per_scene=False), 3)
+            res = calibrate(st, None, perturbed_seed(truth, np.random.default_rng(n)), settings)
+            print(f"{n:6d} {st.n_points:8d} {1000 * ev:7.1f} {res.seconds:8.2f}", flush=True)
+
+    if args.cli:
+        out = OUT / "cli_result.yaml"
+        t = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "l2e_studio", "calibrate", "--scenes", str(folder), "--out", str(out), "--quiet"],
+                       check=True)
+        print(f"\nwhole `l2e-studio calibrate` process on {args.scenes} scenes: {time.perf_counter() - t:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
