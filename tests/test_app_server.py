@@ -1,0 +1,150 @@
+"""The running app without a browser: the GUI handles' callbacks, the 3D gizmo, scene
+switching, seed files, display controls and results, checked through the shared state."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from app_fixtures import free_port, wait_for, write_small_scenes
+from l2e_studio.app.panels.view3d import camera_pose, extrinsic_from_pose
+from l2e_studio.app.pose import sliders_from_extrinsic
+from l2e_studio.calibrate import CalibrationSettings
+from l2e_studio.io.cameras import load_seed
+
+
+@pytest.fixture(scope="module")
+def scene_set(tmp_path_factory):
+    from l2e_studio.scenes import load_scene_folder
+
+    folder = write_small_scenes(tmp_path_factory.mktemp("srv") / "s", n_scenes=3)
+    (folder / "lidar" / "scene_002.txt").write_text("1,2\n3,4\n")  # a broken scan: one failed scene
+    return load_scene_folder(folder)
+
+
+@pytest.fixture
+def app(scene_set, tmp_path):
+    from l2e_studio.app.server import build_app
+
+    a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out")
+    a.overlay_worker.wait_idle(10)
+    a.mi_worker.wait_idle(10)
+    yield a
+    a.stop()
+
+
+def user(client=None):
+    """A GUI event as if a browser tab sent it."""
+    return SimpleNamespace(client=client or SimpleNamespace(add_notification=lambda *a, **k: None,
+                                                             send_file_download=lambda *a, **k: None), client_id=1)
+
+
+def idle(app) -> None:
+    for w in (app.overlay_worker, app.mi_worker, app.compare_worker):
+        assert w.wait_idle(20)
+
+
+def test_failed_scene_is_listed_with_its_error(app, scene_set):
+    assert [f.name for f in scene_set.failures] == ["scene_002"]
+    assert app.state.scene_names == ["scene_000", "scene_001"]
+    text = app.scenes.failures.content
+    assert app.scenes.failures.visible and "scene_002" in text and "scene_002.txt" in text
+
+
+def test_gizmo_and_sliders_edit_the_same_extrinsic(app):
+    ext = app.state.reference.perturbed([0.02, -0.01, 0.03], [0.01, 0.02, -0.01])
+    wxyz, pos = camera_pose(ext)
+    assert np.allclose(extrinsic_from_pose(wxyz, pos).params, ext.params, atol=1e-12)
+    app.view3d.gizmo.wxyz, app.view3d.gizmo.position = wxyz, pos
+    app.view3d._on_gizmo(user())
+    assert np.allclose(app.state.snapshot().extrinsic.params, ext.params, atol=1e-12)
+    sliders = np.array([s.value for s in app.extrinsic.sliders])
+    assert np.allclose(sliders, sliders_from_extrinsic(ext, app.state.reference), atol=1e-9)
+    frames = app.overlay.frames
+    idle(app)
+    assert app.overlay.frames > frames
+    # and the other way: a slider move re-poses the gizmo
+    app.extrinsic.sliders[0].value = float(app.extrinsic.sliders[0].value) + 0.05
+    app.extrinsic._on_slider(user())
+    w2, p2 = camera_pose(app.state.snapshot().extrinsic)
+    assert np.allclose(app.view3d.gizmo.position, p2) and not np.allclose(p2, pos)
+
+
+def test_scene_switch_changes_cloud_overlay_and_readout(app):
+    cloud0 = np.array(app.view3d.cloud.points)
+    image0 = app.overlay.image.image.copy()
+    app.scenes.dropdown.value = "scene_001"
+    app.select_scene(1)
+    idle(app)
+    assert app.state.snapshot().selected == 1
+    assert not np.array_equal(np.array(app.view3d.cloud.points), cloud0)
+    assert not np.array_equal(app.overlay.image.image, image0)
+    assert "scene_001" in app.overlay.caption.content and "scene_001" in app.extrinsic.readout.content
+
+
+def test_exclusion_changes_the_pooled_mi_only(app):
+    idle(app)
+    before = app.reading
+    app.state.set_included(1, False)
+    app.inclusion_changed()
+    idle(app)
+    after = app.reading
+    assert after.total != pytest.approx(before.total)
+    assert np.allclose(after.per_scene, before.per_scene)
+    assert "1 included scenes" in app.extrinsic.readout.content
+    with pytest.raises(RuntimeError):
+        app.state.set_all_included(False)
+        app.start_run(CalibrationSettings())
+
+
+def test_display_controls_change_the_overlay(app):
+    idle(app)
+    shots = [app.overlay.image.image.copy()]
+    for handle, value in ((app.overlay.color_by, "depth"), (app.overlay.point_size, 4),
+                          (app.overlay.contrast, 3.0), (app.overlay.map_mode, "smoothed")):
+        handle.value = value  # programmatic updates run the same callbacks
+        idle(app)
+        shots.append(app.overlay.image.image.copy())
+    for a, b in zip(shots, shots[1:]):
+        assert not np.array_equal(a, b)
+
+
+def test_seed_save_and_reset(app):
+    ext = app.state.reference.perturbed([0.01, 0, 0], [0, 0, 0.01])
+    app.set_extrinsic(ext, source="test")
+    sent = {}
+    client = SimpleNamespace(add_notification=lambda title, body, **k: sent.setdefault("note", (title, body)),
+                             send_file_download=lambda name, data, **k: sent.setdefault("file", (name, data)))
+    app.extrinsic._on_save(user(client))
+    saved = list(app.out_dir.glob("seed_*.yaml"))
+    assert len(saved) == 1 and sent["note"][0] == "Seed saved" and str(saved[0]) in sent["note"][1]
+    assert np.allclose(load_seed(saved[0]).params, ext.params, atol=1e-9)
+    assert sent["file"][1] == saved[0].read_bytes()
+    app.extrinsic.reset.value = True  # a click
+    # the reset button's click callback runs synchronously on assignment
+    assert np.allclose(app.state.snapshot().extrinsic.params, app.state.reference.params)
+    assert np.allclose([s.value for s in app.extrinsic.sliders][3:], 0, atol=1e-9)
+
+
+def test_run_result_accept_and_discard(app):
+    app.start_run(CalibrationSettings(rotation_only=True, coarse_to_fine=False))
+    assert app.wait_run(120)
+    snap = app.state.snapshot()
+    assert snap.run.status == "done" and snap.result is not None
+    assert not app.results.accept.disabled and not app.results.save.disabled
+    assert "MI" in app.results.summary.content and "scene_000" in app.results.table.content
+    idle(app)
+    assert app.compare.frames >= 1 and app.compare.image.visible
+    for mode in ("swipe", "blend"):
+        app.compare.mode.value = mode
+        idle(app)
+        assert app.compare.image.image.shape == (app.camera.height, app.camera.width, 3)
+    app.accept_result()
+    assert np.allclose(app.state.snapshot().extrinsic.params, snap.result.extrinsic.params)
+    app.discard_result()
+    idle(app)
+    assert app.results.accept.disabled and not app.compare.image.visible
+    with pytest.raises(RuntimeError):
+        app.save_result()
