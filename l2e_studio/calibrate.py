@@ -8,8 +8,9 @@ The search is over a correction ``(dt, dw)`` of the seed (camera frame; ``R = ex
 ``t = t_seed + dt``) bounded per axis by ``translation_bound`` metres and
 ``rotation_bound_deg`` degrees. Stages run from wide to narrow map smoothing (and from a thinned
 point set on downsampled maps to the full set at full resolution): the 20 px stage sees a basin
-several degrees across, the last one climbs the paper's objective at ``sigma`` over every third
-point (the full set moves the optimum by less than the noise of repeated runs and costs 3x).
+several degrees across, the last one climbs the paper's objective at ``sigma``. Stages thin the
+points to a budget (500k for the last: 40 full-size scenes put ~1.3M in the image, and all of them
+move the optimum by less than the spread of repeated runs while costing 3x).
 
 Why the last stage smooths by 2 px and not the reference code's 5 px: heavy smoothing flattens
 the MI along the direction where a small rotation and a translation compensate each other, and
@@ -42,11 +43,12 @@ FTOL_COARSE, FTOL_FINAL = 1e-5, 1e-7
 
 @dataclass(frozen=True)
 class Stage:
-    """One pass of the optimiser: map smoothing ``sigma`` (full-resolution px), every
-    ``step``-th point, maps resized by ``scale`` (coarse stages need no full resolution)."""
+    """One pass of the optimiser: map smoothing ``sigma`` (full-resolution px), at most
+    ``max_points`` of the points in the image (evenly thinned; None = all), maps resized by
+    ``scale`` (coarse stages need no full resolution)."""
 
     sigma: float
-    step: int = 1
+    max_points: int | None = None
     scale: float = 1.0
 
 
@@ -71,12 +73,23 @@ class CalibrationSettings:
         if self.sigma < 0:
             raise ValueError("sigma must be >= 0")
 
-    def schedule(self) -> tuple[Stage, ...]:
+    def schedule(self, image_width: int = 1280) -> tuple[Stage, ...]:
+        """The stages for maps ``image_width`` pixels wide.
+
+        Coarse smoothing is set for the paper's 1280-pixel sensor and scaled with the width, so
+        that a stage sees the same angular blur whatever the camera; coarse maps are downsampled
+        no further than 320 pixels wide.
+        """
         if self.stages:
             return self.stages
         if not self.coarse_to_fine:
-            return (Stage(self.sigma, 1),)
-        return (Stage(20.0, 8, 0.25), Stage(8.0, 3, 0.5), Stage(self.sigma, 3, 1.0))
+            return (Stage(self.sigma),)
+        w = image_width / 1280.0
+        return (
+            Stage(max(20.0 * w, self.sigma), 150_000, min(1.0, max(0.25, 320.0 / image_width))),
+            Stage(max(8.0 * w, self.sigma), 400_000, min(1.0, max(0.5, 640.0 / image_width))),
+            Stage(self.sigma, 500_000, 1.0),
+        )
 
 
 @dataclass(frozen=True)
@@ -108,6 +121,7 @@ class CalibrationResult:
     cancelled: bool = False
     history: list[tuple[int, float, int]] = field(default_factory=list)  # (evaluation, MI, stage)
     message: str = ""
+    stages: tuple[Stage, ...] = ()  # the schedule that ran
 
     @property
     def improved(self) -> bool:
@@ -145,7 +159,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         reach_m = 2 * settings.translation_bound
         stack = SceneStack.build(scenes, camera, settings.sigma, seed, reach_m, 2 * settings.rotation_bound_deg)
     final = stack.with_sigma(settings.sigma)
-    stages = settings.schedule()
+    stages = settings.schedule(stack.camera.width)
     scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
     free = np.array([not settings.rotation_only] * 3 + [True] * 3)
     if settings.translation_bound == 0:
@@ -157,7 +171,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
     cancelled = False
     message = ""
     for k, stage in enumerate(stages):
-        obj = stack.with_sigma(stage.sigma, stage.scale).subsample(stage.step).objective(seed, start=current)
+        obj = stack.with_sigma(stage.sigma, stage.scale).objective(seed, start=current, max_points=stage.max_points)
         tracker = _Tracker(obj, scale, free, k, len(stages), settings.max_iterations, on_progress, cancel, t0, count, history)
         try:
             res = _run_stage(obj, tracker, settings, final=k == len(stages) - 1)
@@ -190,6 +204,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         cancelled=cancelled,
         history=history,
         message=message,
+        stages=stages,
     )
 
 

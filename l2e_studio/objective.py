@@ -128,10 +128,11 @@ class SceneStack:
             bounds=np.concatenate([[0], np.cumsum(counts)]),
         )
 
-    def subsample(self, step: int) -> "SceneStack":
-        """Every ``step``-th point (scan order, so the sample stays spatially even)."""
-        if step <= 1:
+    def thinned(self, max_points: int | None) -> "SceneStack":
+        """At most ``max_points`` points: every k-th in scan order, so the sample stays even."""
+        if max_points is None or self.n_points <= max_points:
             return self
+        step = -(-self.n_points // max_points)
         mask = np.zeros(self.n_points, dtype=bool)
         mask[::step] = True
         return self.select(mask)
@@ -183,12 +184,14 @@ class SceneStack:
         return n_in / np.maximum(np.diff(self.bounds), 1)
 
     # --- the optimiser's objective -------------------------------------------------------
-    def objective(self, base: Extrinsic, start: Extrinsic | None = None) -> "SmoothObjective":
+    def objective(
+        self, base: Extrinsic, start: Extrinsic | None = None, max_points: int | None = None
+    ) -> "SmoothObjective":
         """The differentiable MI as a function of a correction of ``base``, over the points
-        that land in the image at ``start`` (default: ``base``)."""
+        that land in the image at ``start`` (default: ``base``), thinned to ``max_points``."""
         start = base if start is None else start
         _, inside = self.project(start)
-        return SmoothObjective(self.select(inside), base, start)
+        return SmoothObjective(self.select(inside).thinned(max_points), base, start)
 
 
 class SmoothObjective:

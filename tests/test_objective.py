@@ -1,0 +1,104 @@
+"""The stacked-scene MI and the differentiable objective the optimiser climbs."""
+
+import numpy as np
+import pytest
+
+from l2e_studio.camera import CameraModel
+from l2e_studio.geometry import Extrinsic, project_points
+from l2e_studio.mi import mutual_information
+from l2e_studio.objective import SceneStack, prepare_map
+from l2e_studio.scenes import Scene
+
+
+def test_prepare_map_clips_then_smooths():
+    m = np.zeros((50, 60), np.float32)
+    m[25, 30] = 1000.0
+    raw = prepare_map(m, sigma=0)
+    assert raw.max() == 127.0
+    smooth = prepare_map(m, sigma=3)
+    assert smooth.max() < 127.0
+    assert smooth.sum() == pytest.approx(127.0, rel=1e-3)  # smoothing keeps the clipped mass
+
+
+def test_stack_mi_equals_direct_per_scene_computation(small_synth):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    total, per_scene = stack.mi(truth)
+    ls, es = [], []
+    for sc in scenes:
+        uv, front = project_points(truth.transform(sc.points.astype(np.float64)), camera)
+        ui, vi = np.rint(uv[:, 0]), np.rint(uv[:, 1])
+        ok = front & (ui >= 0) & (ui < camera.width) & (vi >= 0) & (vi < camera.height)
+        m = prepare_map(sc.event_map, 2.0)
+        e = np.rint(m[vi[ok].astype(int), ui[ok].astype(int)])
+        l = np.rint(sc.intensity[ok])
+        ls.append(l)
+        es.append(e)
+        # the stack projects in float32: a handful of points round to the neighbouring pixel
+        assert per_scene[len(ls) - 1] == pytest.approx(mutual_information(l, e), rel=1e-4)
+    assert total == pytest.approx(mutual_information(np.concatenate(ls), np.concatenate(es)), rel=1e-4)
+
+
+def test_mi_is_highest_at_the_true_extrinsic(small_synth):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    at_truth = stack.mi(truth, per_scene=False)[0]
+    for dt, dw in [([0.03, 0, 0], [0, 0, 0]), ([0, 0, 0], [0, np.radians(0.5), 0]), ([0, -0.02, 0], [0.01, 0, 0])]:
+        assert stack.mi(truth.perturbed(dt, dw), per_scene=False)[0] < at_truth
+
+
+@pytest.mark.parametrize("distortion", ["radtan", "equidistant"])
+def test_analytic_gradient_matches_finite_differences(small_synth, distortion):
+    scenes, camera, truth = small_synth
+    if distortion == "equidistant":
+        camera = CameraModel(camera.K, camera.width, camera.height, [0.02, -0.01, 0.003, 0.0], "equidistant")
+    stack = SceneStack.build(scenes, camera, sigma=4.0)
+    base = truth.perturbed([0.02, -0.01, 0.015], [0.01, -0.008, 0.012])
+    obj = stack.objective(base)
+    delta = np.array([0.004, -0.003, 0.002, 0.002, 0.001, -0.002])
+    value, grad = obj.value_and_grad(delta)
+    assert value == pytest.approx(obj.value(delta), abs=1e-12)
+    steps = np.array([1e-4] * 3 + [3e-5] * 3)
+    numeric = np.array(
+        [(obj.value(delta + np.eye(6)[k] * steps[k]) - obj.value(delta - np.eye(6)[k] * steps[k])) / (2 * steps[k]) for k in range(6)]
+    )
+    assert np.allclose(grad, numeric, rtol=0.05, atol=0.02 * np.abs(numeric).max())
+
+
+def test_objective_point_set_stays_fixed_when_points_leave_the_image(small_synth):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    obj = stack.objective(truth)
+    n = obj.stack.n_points
+    far = np.array([0.0, 0.0, 0.0, 0.0, np.radians(25.0), 0.0])  # most points now fall off the image
+    e, _ = obj._sample(far, jacobian=False)
+    assert e.shape == (n,)
+    assert obj.value(far) < obj.value(np.zeros(6))  # pushing points off the image does not pay
+
+
+def test_reachable_culling_keeps_every_point_that_can_land_in_the_image(small_synth):
+    scenes, camera, truth = small_synth
+    full = SceneStack.build(scenes, camera, sigma=2.0)
+    culled = SceneStack.build(scenes, camera, sigma=2.0, reference=truth, reach_m=0.2, reach_deg=10.0)
+    assert culled.n_points < full.n_points
+    for ext in [truth, truth.perturbed([0.1, -0.1, 0.1], np.radians([5.0, -5.0, 5.0]))]:
+        assert culled.project(ext)[1].sum() == full.project(ext)[1].sum()
+        assert culled.mi(ext, per_scene=False)[0] == pytest.approx(full.mi(ext, per_scene=False)[0], rel=1e-9)
+
+
+def test_stack_rejects_a_map_of_the_wrong_size(small_synth):
+    scenes, camera, _ = small_synth
+    bad = Scene("bad", scenes[0].points, scenes[0].intensity, np.zeros((10, 10), np.float32))
+    with pytest.raises(ValueError, match="bad: map is 10x10, camera expects 640x360"):
+        SceneStack.build([scenes[0], bad], camera)
+
+
+def test_coarse_stack_uses_a_scaled_camera(small_synth):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    coarse = stack.with_sigma(8.0, 0.5)
+    assert coarse.maps.shape[1:] == (180 + 2, 320 + 2)
+    assert coarse.camera.width == 320 and coarse.full_camera is camera
+    # the objective on the coarse maps still peaks near the truth
+    obj = coarse.objective(truth)
+    assert obj.value(np.zeros(6)) > obj.value(np.array([0, 0, 0, 0, np.radians(2.0), 0]))
