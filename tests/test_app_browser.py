@@ -71,10 +71,17 @@ def overlay_digest(page) -> str:
     """SHA-256 of the JPEG bytes the overlay image currently shows."""
     return page.evaluate(
         """async () => {
-            const img = document.querySelector("img[src^='blob:']");
-            const buf = await (await fetch(img.src)).arrayBuffer();
-            const d = await crypto.subtle.digest("SHA-256", buf);
-            return Array.from(new Uint8Array(d)).map(b => b.toString(16).padStart(2, "0")).join("");
+            for (let attempt = 0; ; attempt++) {
+                const img = document.querySelector("img[src^='blob:']");
+                try {  // a new frame can revoke the blob URL between the lookup and the fetch
+                    const buf = await (await fetch(img.src)).arrayBuffer();
+                    const d = await crypto.subtle.digest("SHA-256", buf);
+                    return Array.from(new Uint8Array(d)).map(b => b.toString(16).padStart(2, "0")).join("");
+                } catch (err) {
+                    if (attempt >= 20) throw err;
+                    await new Promise(r => setTimeout(r, 50));
+                }
+            }
         }"""
     )
 
