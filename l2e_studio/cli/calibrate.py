@@ -57,9 +57,9 @@ def run(args: argparse.Namespace) -> int:
         )
         prog.update(task, completed=prog.tasks[0].total or 1, description=f"loaded {len(scene_set.scenes)} scenes")
     for msg in scene_set.unpaired:
-        err.print(f"[yellow]warning:[/] unpaired file {msg}", highlight=False)
+        print(f"warning: unpaired file {msg}", file=sys.stderr)
     for fail in scene_set.failures:
-        err.print(f"[yellow]warning:[/] skipped scene {fail.name}: {fail.error}", highlight=False)
+        print(f"warning: skipped scene {fail.name}: {fail.error}", file=sys.stderr)
     t_loaded = time.perf_counter()
 
     seed = scene_set.seed
