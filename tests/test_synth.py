@@ -274,7 +274,8 @@ def test_cli_rejects_impossible_sizes(tmp_path, capsys):
 def test_embedded_sample_loads_and_is_small():
     if not (ASSETS / "truth.yaml").is_file():
         pytest.skip("assets/sample not generated")
-    size = sum(p.stat().st_size for p in ASSETS.rglob("*") if p.is_file())
+    files = [p for p in ASSETS.rglob("*") if p.is_file() and not any(part.startswith(".") for part in p.relative_to(ASSETS).parts)]
+    size = sum(p.stat().st_size for p in files)
     assert size < 15e6
     ss = load_scene_folder(ASSETS, use_cache=False)
     assert len(ss.scenes) == SAMPLE_CONFIG.n_scenes and not ss.failures
