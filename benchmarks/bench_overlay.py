@@ -65,6 +65,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=60)
     parser.add_argument("--point-size", type=int, default=3)
     parser.add_argument("--scenes", type=int, default=40, help="scenes loaded in the app for part 2")
+    parser.add_argument("--no-app", action="store_true", help="time the renderer only (part 1)")
     args = parser.parse_args()
 
     camera, pts, intensity = full_size_scene(args.points, args.width, args.height)
@@ -119,7 +120,8 @@ def main() -> None:
         print(f"before/after compose+encode ({mode}): median {np.median(ts) * 1e3:.1f} ms")
 
 
-    app_latency(camera, pts, intensity, event_map, seed, args.repeats, args.scenes)
+    if not args.no_app:
+        app_latency(camera, pts, intensity, event_map, seed, args.repeats, args.scenes)
 
 
 def app_latency(camera, pts, intensity, event_map, seed, repeats: int, n_scenes: int) -> None:

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app_fixtures import free_port, wait_for, write_small_scenes
+from app_fixtures import free_port, write_small_scenes
 from l2e_studio.app.panels.view3d import camera_pose, extrinsic_from_pose
 from l2e_studio.app.pose import sliders_from_extrinsic
 from l2e_studio.calibrate import CalibrationSettings

@@ -13,11 +13,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
 import viser
 
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
@@ -39,7 +37,6 @@ from .workers import LatestWorker, Ticker
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
-OVERLAY_PANEL_WIDTH = 760  # px; the 3D view takes what is left between the two panels
 PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
 
 

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     from ..server import App
 
 JPEG_QUALITY = 80
+PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
 
 
 class OverlayPanel:
@@ -49,9 +50,7 @@ class OverlayPanel:
         for handle in (self.color_by, self.point_size, self.opacity, self.contrast, self.map_mode):
             handle.on_update(lambda _: app.display_changed())
         self.panel.dock_left()
-        from ..server import OVERLAY_PANEL_WIDTH
-
-        self.panel.set_width(OVERLAY_PANEL_WIDTH)
+        self.panel.set_width(PANEL_WIDTH)
 
     def style(self) -> OverlayStyle:
         return OverlayStyle(
