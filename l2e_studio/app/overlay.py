@@ -159,8 +159,9 @@ def draw_points(
 
     Each point's rank is scattered into a one-channel image (near points ranked above far ones
     when ``depth`` is given), the image is grown into discs by one grey dilation (a max filter:
-    where discs overlap, the nearer point wins), and the winners' colours are gathered.
-    ``opacity`` blends the discs with the map underneath.
+    where discs overlap, the nearer point wins), the ranks are turned into colours through a
+    packed RGBA palette, and the disc pixels are copied (or blended, with ``opacity``) onto
+    the map. Whole-image operations only: no per-point or per-offset loop.
     """
     h, w = base.shape[:2]
     out = base.copy()
@@ -178,15 +179,14 @@ def draw_points(
     if point_size > 1:
         kernel, anchor = _disc_kernel(int(point_size))
         rank = cv2.dilate(rank, kernel, anchor=anchor)
-    flat_rank = rank.reshape(-1)
-    idx = np.flatnonzero(flat_rank)
-    src = colors[flat_rank[idx].astype(np.int64) - 1]
-    flat_out = out.reshape(-1, 3)
-    if opacity >= 1.0:
-        flat_out[idx] = src
-    else:
-        a = float(opacity)
-        flat_out[idx] = cv2.addWeighted(flat_out[idx], 1.0 - a, np.ascontiguousarray(src), a, 0.0)
+    palette = np.zeros((u.size + 1, 4), np.uint8)  # RGBA rows viewed as one uint32 each
+    palette[1:, :3] = colors
+    layer = palette.view(np.uint32).ravel()[rank.astype(np.int32)]
+    layer = np.ascontiguousarray(layer.view(np.uint8).reshape(h, w, 4)[:, :, :3])
+    if opacity < 1.0:
+        layer = cv2.addWeighted(base, 1.0 - float(opacity), layer, float(opacity), 0.0)
+    mask = (rank > 0).view(np.uint8)
+    cv2.copyTo(layer, mask, out)
     return out
 
 
