@@ -148,3 +148,16 @@ def test_run_result_accept_and_discard(app):
     assert app.results.accept.disabled and not app.compare.image.visible
     with pytest.raises(RuntimeError):
         app.save_result()
+
+
+def test_sliders_widen_their_range_for_a_far_extrinsic(app):
+    ref = app.state.reference
+    far = ref.perturbed([1.3, 0.0, 0.0], [0.0, 0.0, np.radians(40.0)])
+    app.set_extrinsic(far, source="file")
+    x, roll = app.extrinsic.sliders[0], app.extrinsic.sliders[3]  # optical z = body forward: a roll
+    assert x.min <= far.translation[0] <= x.max and x.value == pytest.approx(far.translation[0])
+    assert roll.min <= roll.value <= roll.max and roll.value == pytest.approx(40.0)
+    values = np.array([s.value for s in app.extrinsic.sliders])
+    from l2e_studio.app.pose import extrinsic_from_sliders
+
+    assert np.allclose(extrinsic_from_sliders(values, ref).params, far.params, atol=1e-9)

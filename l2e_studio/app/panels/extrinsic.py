@@ -45,7 +45,7 @@ class ExtrinsicPanel:
         for i, name in enumerate(SLIDER_NAMES):
             if i < 3:
                 c = float(self.reference.translation[i])
-                s = gui.add_slider(f"{name} (m)", round(c - TRANSLATION_RANGE, 4), round(c + TRANSLATION_RANGE, 4),
+                s = gui.add_slider(f"{name} (m)", round(c - TRANSLATION_RANGE, 2), round(c + TRANSLATION_RANGE, 2),
                                    0.001, float(values[i]), hint=f"T_cam_lidar translation {name}, metres")
             else:
                 s = gui.add_slider(f"{name} (°)", -ROTATION_RANGE, ROTATION_RANGE, 0.1, float(values[i]),
@@ -108,7 +108,7 @@ class ExtrinsicPanel:
         for s, v in zip(self.sliders, values):
             if not s.min <= v <= s.max:
                 half = (s.max - s.min) / 2
-                s.min, s.max = round(v - half, 4), round(v + half, 4)
+                s.min, s.max = float(np.floor((v - half) * 100) / 100), float(np.ceil((v + half) * 100) / 100)
             s.value = float(v)
 
     def show_pose_text(self, extrinsic: Extrinsic) -> None:
