@@ -161,3 +161,21 @@ def test_sliders_widen_their_range_for_a_far_extrinsic(app):
     from l2e_studio.app.pose import extrinsic_from_sliders
 
     assert np.allclose(extrinsic_from_sliders(values, ref).params, far.params, atol=1e-9)
+
+
+def test_a_failing_run_is_reported_and_the_app_carries_on(app, monkeypatch):
+    import l2e_studio.app.server as server_module
+
+    def broken(*args, **kwargs):
+        raise ValueError("the optimiser fell over")
+
+    notes = []
+    monkeypatch.setattr(server_module, "calibrate", broken)
+    monkeypatch.setattr(app, "notify_all", lambda title, body, color=None: notes.append((title, body)))
+    app.start_run(CalibrationSettings())
+    assert app.wait_run(30)
+    run = app.state.snapshot().run
+    assert run.status == "failed" and "fell over" in run.error
+    assert notes and notes[-1][0] == "Optimisation failed" and "fell over" in notes[-1][1]
+    assert not app.optimise.start.disabled and app.optimise.cancel.disabled
+    assert "Failed" in app.optimise.status.content

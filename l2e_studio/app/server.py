@@ -43,14 +43,15 @@ PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
 class App:
     """A running workbench. Create with :func:`build_app`; stop with :meth:`stop`."""
 
-    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path, sigma: float = 5.0) -> None:
+    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path) -> None:
         self.scene_set = scene_set
         self.server = server
         self.camera = scene_set.camera
         self.out_dir = Path(out_dir)
         self.state = SessionState(scene_set.names, reference=scene_set.seed)
         self.displays = [SceneDisplay(s) for s in scene_set.scenes]
-        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, sigma)
+        # The readout smooths the maps like the optimiser's default; the sigma field updates both.
+        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma)
         self.reading: MiReading | None = None
         self._reference_mi: dict[tuple, float] = {}
         self._cancel: threading.Event | None = None
@@ -119,7 +120,8 @@ class App:
     def sigma_changed(self, sigma: float) -> None:
         self.readout.set_sigma(sigma)
         self.mi_worker.poke()
-        self.overlay_worker.poke()
+        self.overlay_worker.poke()  # the "smoothed" map view uses the same sigma
+        self.compare_worker.poke()
 
     def refresh(self) -> None:
         """Redraw everything from the state (start-up, accept, reset)."""
