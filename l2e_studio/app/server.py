@@ -58,6 +58,7 @@ class App:
         self._run_thread: threading.Thread | None = None
         self._ticker: Ticker | None = None
         self.overlay_seconds: list[float] = []  # server-side render+encode time of each frame
+        self._ui_lock = threading.RLock()  # one change at a time: state and widgets stay in step
 
         gui = server.gui
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(28, 126, 214))
@@ -91,19 +92,21 @@ class App:
     # --- changes from any panel ----------------------------------------------------------------
     def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> None:
         """Make ``extrinsic`` current and update every view except the one it came from."""
-        self.state.set_extrinsic(extrinsic)
-        if source != "sliders":
-            self.extrinsic.show(extrinsic)
-        if source != "gizmo":
-            self.view3d.show_pose(extrinsic)
-        self.extrinsic.show_pose_text(extrinsic)
+        with self._ui_lock:
+            self.state.set_extrinsic(extrinsic)
+            if source != "sliders":
+                self.extrinsic.show(extrinsic)
+            if source != "gizmo":
+                self.view3d.show_pose(extrinsic)
+            self.extrinsic.show_pose_text(extrinsic)
         self.overlay_worker.poke()
         self.mi_worker.poke()
 
     def select_scene(self, index: int) -> None:
-        self.state.select(index)
-        self.scenes.show_selection()
-        self.view3d.show_scene(index)
+        with self._ui_lock:
+            self.state.select(index)
+            self.scenes.show_selection()
+            self.view3d.show_scene(index)
         self.overlay_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
@@ -124,7 +127,7 @@ class App:
         self.compare_worker.poke()
 
     def refresh(self) -> None:
-        """Redraw everything from the state (start-up, accept, reset)."""
+        """Draw every panel from the state (at start-up)."""
         snap = self.state.snapshot()
         self.extrinsic.show(snap.extrinsic)
         self.extrinsic.show_pose_text(snap.extrinsic)
