@@ -31,10 +31,14 @@ def test_folder_without_scenes_is_rejected(tmp_path, capsys):
     assert "no scene found" in capsys.readouterr().err
 
 
-def test_serve_prints_the_url_binds_loopback_and_serves_the_page(tmp_path):
-    scenes = write_small_scenes(tmp_path / "scenes", n_scenes=2)
+@pytest.mark.parametrize("which", ["given", "embedded sample"])
+def test_serve_prints_the_url_binds_loopback_and_serves_the_page(tmp_path, which):
     port = free_port()
-    cmd = [sys.executable, "-m", "l2e_studio", "--scenes", str(scenes), "--port", str(port), "--out", str(tmp_path / "out")]
+    cmd = [sys.executable, "-m", "l2e_studio", "--port", str(port), "--out", str(tmp_path / "out")]
+    if which == "given":
+        cmd += ["--scenes", str(write_small_scenes(tmp_path / "scenes", n_scenes=2))]
+    elif not (REPO / "assets" / "sample").is_dir():
+        pytest.skip("assets/sample is not in this checkout")
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         lines = []
@@ -48,6 +52,8 @@ def test_serve_prints_the_url_binds_loopback_and_serves_the_page(tmp_path):
                 break
         url = f"http://127.0.0.1:{port}"
         assert any(url in line and "running at" in line for line in lines), "".join(lines)
+        if which == "embedded sample":
+            assert any(str(REPO / "assets" / "sample") in line for line in lines)
         assert any(f"ssh -L {port}:127.0.0.1:{port}" in line for line in lines)
         with urllib.request.urlopen(url, timeout=10) as response:
             assert response.status == 200
