@@ -122,7 +122,9 @@ def main() -> None:
         t = time.perf_counter()
         subprocess.run([sys.executable, "-m", "l2e_studio", "calibrate", "--scenes", str(folder), "--out", str(out), "--quiet"],
                        check=True)
-        print(f"\nwhole `l2e-studio calibrate` process on {args.scenes} scenes: {time.perf_counter() - t:.2f} s")
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        print(f"\nwhole `l2e-studio calibrate` process on {args.scenes} scenes: {time.perf_counter() - t:.2f} s, "
+              f"peak memory {peak:.0f} MB")
 
 
 if __name__ == "__main__":

@@ -143,10 +143,22 @@ def skew(w: np.ndarray) -> np.ndarray:
 # --- projection --------------------------------------------------------------------------------
 
 
-def distort(x: np.ndarray, y: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """Apply lens distortion to normalised image coordinates."""
-    xd, yd, _ = _distort(x, y, camera, jacobian=False)
-    return xd, yd
+def distort(x: np.ndarray, y: np.ndarray, camera: CameraModel, jacobian: bool = False):
+    """Apply lens distortion to normalised image coordinates ``(x, y) = (X/Z, Y/Z)``.
+
+    Returns ``(xd, yd, J)`` where J, with ``jacobian``, is the 2x2 Jacobian
+    ``d(xd, yd)/d(x, y)`` as four arrays ``(dxd/dx, dxd/dy, dyd/dx, dyd/dy)``, else None.
+    """
+    D = camera.D
+    if not camera.is_distorted:
+        if not jacobian:
+            return x, y, None
+        one = np.ones_like(x)
+        zero = np.zeros_like(x)
+        return x, y, (one, zero, zero, one)
+    if camera.model == "equidistant":
+        return _distort_equidistant(x, y, D.astype(x.dtype), jacobian)
+    return _distort_radtan(x, y, D.astype(x.dtype), jacobian)
 
 
 def project_points(points_cam: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
@@ -186,7 +198,7 @@ def project_with_jacobian(
         inv_z = np.where(in_front, 1.0 / Z, np.nan).astype(P.dtype, copy=False)
     x = X * inv_z
     y = Y * inv_z
-    xd, yd, Jd = _distort(x, y, camera, jacobian)
+    xd, yd, Jd = distort(x, y, camera, jacobian)
     K = camera.K.astype(P.dtype)
     fx, fy, s, cx, cy = K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]
     uv = np.empty((P.shape[0], 2), dtype=P.dtype)
@@ -208,20 +220,6 @@ def project_with_jacobian(
     J[:, 1, 1] = dv_dy * inv_z
     J[:, 1, 2] = -(dv_dx * x + dv_dy * y) * inv_z
     return uv, in_front, J
-
-
-def _distort(x: np.ndarray, y: np.ndarray, camera: CameraModel, jacobian: bool):
-    """Distorted normalised coordinates and, optionally, their 2x2 Jacobian (4 arrays)."""
-    D = camera.D
-    if not camera.is_distorted:
-        if not jacobian:
-            return x, y, None
-        one = np.ones_like(x)
-        zero = np.zeros_like(x)
-        return x, y, (one, zero, zero, one)
-    if camera.model == "equidistant":
-        return _distort_equidistant(x, y, D.astype(x.dtype), jacobian)
-    return _distort_radtan(x, y, D.astype(x.dtype), jacobian)
 
 
 def _distort_radtan(x, y, D, jacobian):

@@ -20,14 +20,14 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .camera import CameraModel
-from .geometry import Extrinsic, _distort, in_image, left_jacobian, project_points
+from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
 from .mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
 
@@ -152,18 +152,35 @@ class SceneStack:
         uv, front = project_points(pc.T, self.camera)
         return uv, front & (pc[2] > MIN_DEPTH) & in_image(uv, self.camera)
 
-    def joint_histograms(self, extrinsic: Extrinsic) -> np.ndarray:
-        """(S, 256, 256) joint (L, E) counts per scene, nearest-pixel lookup, in-image points."""
-        uv, inside = self.project(extrinsic)
-        S, Hp, Wp = self.maps.shape
-        ui = np.rint(uv[inside, 0]).astype(np.int64) + 1
-        vi = np.rint(uv[inside, 1]).astype(np.int64) + 1
-        s = self.scene_of[inside].astype(np.int64)
-        e = self.maps.reshape(-1)[(s * Hp + vi) * Wp + ui]
-        e_bins = np.clip(np.rint(e), 0, N_BINS - 1).astype(np.int64)
-        flat = (s * N_BINS + self.l_bins[inside]) * N_BINS + e_bins
-        counts = np.bincount(flat, minlength=S * N_BINS * N_BINS)
+    def joint_histograms(self, extrinsic: Extrinsic, per_scene: bool = True) -> np.ndarray:
+        """(S, 256, 256) joint (L, E) counts per scene, nearest-pixel lookup, in-image points;
+        with ``per_scene=False`` the (1, 256, 256) counts of all scenes pooled."""
+        R = extrinsic.R.astype(np.float32)
+        t = extrinsic.translation.astype(np.float32)
+        flat = np.empty(self.n_points, dtype=np.int32)
+        _run_chunks(lambda a, b: self._joint_index_chunk(R, t, a, b, flat, per_scene), self.n_points)
+        S = self.n_scenes if per_scene else 1
+        size = S * N_BINS * N_BINS
+        counts = np.bincount(flat, minlength=size + 1)[:size]  # the last bin holds points off the image
         return counts.reshape(S, N_BINS, N_BINS).astype(np.float64)
+
+    def _joint_index_chunk(self, R, t, a, b, out, per_scene: bool) -> None:
+        """Flat ([scene,] L, E) histogram index of points a..b; off-image points get the spill bin."""
+        S, Hp, Wp = self.maps.shape
+        pc = R @ self.points[:, a:b]
+        pc += t[:, None]
+        uv, front = project_points(pc.T, self.camera)
+        inside = front & (pc[2] > MIN_DEPTH) & in_image(uv, self.camera)
+        ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int32) + 1
+        vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int32) + 1
+        scene = self.scene_of[a:b]
+        e = self.maps.reshape(-1).take((scene * Hp + vi) * Wp + ui)
+        e_bins = np.minimum(np.rint(e), N_BINS - 1).astype(np.int32)
+        if per_scene:
+            idx = (scene * N_BINS + self.l_bins[a:b]) * N_BINS + e_bins
+            out[a:b] = np.where(inside, idx, S * N_BINS * N_BINS)
+        else:
+            out[a:b] = np.where(inside, self.l_bins[a:b] * N_BINS + e_bins, N_BINS * N_BINS)
 
     def mi(self, extrinsic: Extrinsic, per_scene: bool = True) -> tuple[float, np.ndarray]:
         """The paper's MI at ``extrinsic``: (all scenes pooled, per scene)."""
@@ -171,7 +188,7 @@ class SceneStack:
             return self._mi(extrinsic, per_scene)
 
     def _mi(self, extrinsic: Extrinsic, per_scene: bool) -> tuple[float, np.ndarray]:
-        joints = self.joint_histograms(extrinsic)
+        joints = self.joint_histograms(extrinsic, per_scene)
         total = mi_from_joint_histogram(joints.sum(axis=0))
         if not per_scene:
             return total, np.full(self.n_scenes, np.nan)
@@ -205,8 +222,6 @@ class SmoothObjective:
     point come from a single gather: the map is packed as four 16-bit fixed-point neighbours
     (1/256 of a count) per pixel.
     """
-
-    CHUNK = 65536
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
         if stack.n_points == 0:
@@ -264,13 +279,7 @@ class SmoothObjective:
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
         d = np.empty((6, n), dtype=np.float32) if jacobian else None
-        starts = range(0, n, self.CHUNK)
-        work = [(a, min(a + self.CHUNK, n)) for a in starts]
-        if WORKERS > 1 and len(work) > 1:
-            list(_pool().map(lambda ab: self._sample_chunk(R, t, ab[0], ab[1], e, d), work))
-        else:
-            for a, b in work:
-                self._sample_chunk(R, t, a, b, e, d)
+        _run_chunks(lambda a, b: self._sample_chunk(R, t, a, b, e, d), n)
         np.minimum(e, E_MAX, out=e)
         return e, d
 
@@ -283,7 +292,7 @@ class SmoothObjective:
         x = (Q[0] + t[0]) * inv_z
         y = (Q[1] + t[1]) * inv_z
         cam = self.stack.camera
-        xd, yd, Jd = _distort(x, y, cam, d_out is not None)
+        xd, yd, Jd = distort(x, y, cam, d_out is not None)
         K = self._K
         # packed-map coordinates: map pixel (0, 0) sits at (1, 1) of the zero-padded map
         u = K[0, 0] * xd + (K[0, 2] + 1.0)
@@ -352,9 +361,12 @@ class SmoothObjective:
 
 
 QUANT = 256.0  # fixed-point steps per count in the packed map
-#: Threads that evaluate chunks of points in parallel (numpy releases the GIL in its loops).
+#: Threads that evaluate chunks of points in parallel.
 WORKERS = int(os.environ.get("L2E_THREADS", min(4, os.cpu_count() or 1)))
 _POOL: ThreadPoolExecutor | None = None
+
+
+CHUNK = 65536  # points per work item: a chunk's temporaries stay in cache
 
 
 def _pool() -> ThreadPoolExecutor:
@@ -362,6 +374,21 @@ def _pool() -> ThreadPoolExecutor:
     if _POOL is None:
         _POOL = ThreadPoolExecutor(WORKERS, thread_name_prefix="l2e-objective")
     return _POOL
+
+
+def _run_chunks(work: Callable[[int, int], None], n: int) -> None:
+    """Call ``work(a, b)`` over ``[0, n)`` in chunks, on the worker threads when there are several.
+
+    Each call writes its own slice of the output arrays, so the chunks need no locking; numpy
+    releases the GIL inside its loops, so two cores really work at once.
+    """
+    spans = [(a, min(a + CHUNK, n)) for a in range(0, n, CHUNK)]
+    if WORKERS > 1 and len(spans) > 1:
+        for f in [_pool().submit(work, a, b) for a, b in spans]:
+            f.result()
+    else:
+        for a, b in spans:
+            work(a, b)
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
