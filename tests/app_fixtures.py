@@ -5,7 +5,6 @@ downloaded browser). Imported by ``tests/test_app_*.py``."""
 from __future__ import annotations
 
 import os
-import shutil
 import socket
 import time
 from pathlib import Path
@@ -59,13 +58,20 @@ def need_chromium() -> None:
         pytest.skip("the python playwright package is not installed (pip install -e '.[test]')")
 
 
-def launch_browser(playwright, user_data_dir: Path):
-    """A fresh headless Chromium context (its own profile folder)."""
-    if user_data_dir.exists():
-        shutil.rmtree(user_data_dir)
-    return playwright.chromium.launch_persistent_context(
-        str(user_data_dir), executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True, viewport=VIEWPORT,
-    )
+def launch_browser(playwright):
+    """Headless Chromium; Playwright gives each launch a fresh temporary profile folder."""
+    return playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
+
+
+def new_context(browser):
+    """A browser context (its own cookies, cache and connections) at the screenshot size.
+
+    Close it before stopping the app: an open context keeps connections that make the
+    viser server's shutdown wait for seconds.
+    """
+    context = browser.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(30_000)
+    return context
 
 
 def screenshot(page, name: str) -> Path:
