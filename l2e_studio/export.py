@@ -38,8 +38,13 @@ def extrinsic_to_dict(ext: Extrinsic) -> dict:
     }
 
 
-def result_to_dict(result: CalibrationResult, camera: CameraModel | None = None, scenes_dir: str | Path | None = None) -> dict:
-    """The result file's content as plain Python types."""
+def result_to_dict(
+    result: CalibrationResult,
+    camera: CameraModel | None = None,
+    scenes_dir: str | Path | None = None,
+    quality: dict | None = None,
+) -> dict:
+    """The result file's content as plain Python types (``quality``: an assessment, if run)."""
     ext = result.extrinsic
     s = result.settings
     out = {
@@ -76,6 +81,8 @@ def result_to_dict(result: CalibrationResult, camera: CameraModel | None = None,
     }
     if scenes_dir is not None:
         out["scenes_dir"] = str(scenes_dir)
+    if quality is not None:
+        out["quality"] = quality
     if camera is not None:
         out["camera"] = {
             "model": camera.model,
@@ -95,12 +102,16 @@ def dumps(data: dict, path: str | Path) -> bytes:
 
 
 def write_result(
-    path: str | Path, result: CalibrationResult, camera: CameraModel | None = None, scenes_dir: str | Path | None = None
+    path: str | Path,
+    result: CalibrationResult,
+    camera: CameraModel | None = None,
+    scenes_dir: str | Path | None = None,
+    quality: dict | None = None,
 ) -> tuple[Path, Path | None]:
     """Write the result file atomically. Returns ``(path, backup)``: an existing file at
-    ``path`` is first renamed to a timestamped backup, never overwritten."""
+    ``path`` is first kept under a timestamped backup name, never overwritten."""
     path = Path(path)
-    data = dumps(result_to_dict(result, camera, scenes_dir), path)
+    data = dumps(result_to_dict(result, camera, scenes_dir, quality), path)
     return path, atomic_write_bytes(path, data, keep_existing=True)
 
 

@@ -13,6 +13,7 @@ from rich.table import Table
 
 from ..calibrate import METHODS, CalibrationSettings, calibrate
 from ..errors import InputError
+from ..evaluate import assess
 from ..export import write_result
 from ..geometry import Extrinsic
 from ..objective import SceneStack
@@ -38,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="event-map smoothing of the final stage, pixels (default: %(default)s)")
     p.add_argument("--rotation-only", action="store_true", help="keep the seed's translation, optimise rotation")
     p.add_argument("--single-stage", action="store_true", help="no coarse-to-fine schedule")
+    p.add_argument("--check", action="store_true",
+                   help="also probe the MI around the result and recalibrate on random halves of the scenes; "
+                        "warns when an axis is flat or the answer moves with the scene subset")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -75,7 +79,15 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
 
-    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root)
+    quality = None
+    if args.check:
+        with _progress(args.quiet, err) as prog:
+            prog.add_task("checking the result on scene subsets", total=None)
+            report = assess(stack, result.extrinsic, seed, settings)
+        quality = report.to_dict()
+        for line in report.warnings:
+            print(f"warning: {line}", file=sys.stderr)
+    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root, quality)
     console = Console()
     if not args.quiet:
         console.print(_summary(result, scene_set.seed))
