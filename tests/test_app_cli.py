@@ -90,3 +90,35 @@ def test_build_app_defaults_to_loopback(tmp_path):
 def test_bad_port_is_rejected(args, capsys):
     assert main(["--scenes", "unused", *args]) == 2
     assert "--port" in capsys.readouterr().err
+
+
+def test_busy_port_moves_to_a_free_one_and_says_so(tmp_path, capsys, monkeypatch):
+    import socket
+    import threading
+
+    import l2e_studio.app.server as server_module
+
+    real_serve = server_module.serve
+    seen = {}
+
+    def serve_until_ready(scene_set, host, port, out_dir, on_ready):
+        stop = threading.Event()
+
+        def ready(app):
+            seen["port"] = app.server.get_port()
+            on_ready(app)
+            stop.set()
+
+        real_serve(scene_set, host, port, out_dir, on_ready=ready, stop=stop)
+
+    monkeypatch.setattr(server_module, "serve", serve_until_ready)
+    scenes = write_small_scenes(tmp_path / "scenes", n_scenes=1)
+    with socket.socket() as blocker:
+        blocker.bind(("127.0.0.1", 0))
+        blocker.listen()
+        busy = blocker.getsockname()[1]
+        assert main(["--scenes", str(scenes), "--port", str(busy), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert seen["port"] != busy
+    assert f"port {busy} is busy; serving on {seen['port']}" in out
+    assert f"ssh -L {seen['port']}:127.0.0.1:{seen['port']}" in out

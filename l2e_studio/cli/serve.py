@@ -42,10 +42,13 @@ def run(args: argparse.Namespace) -> int:
     from ..app.server import serve
 
     def ready(app) -> None:
+        port = app.server.get_port()
+        if port != args.port:
+            print(f"  port {args.port} is busy; serving on {port} instead", flush=True)
         print(f"L2E Studio is running at {app.url}  (Ctrl+C to stop)", flush=True)
         if args.host in ("127.0.0.1", "localhost", "::1"):
-            print(f"  remote machine? forward the port: ssh -L {args.port}:127.0.0.1:{args.port} <host>, "
-                  f"then open http://127.0.0.1:{args.port}", flush=True)
+            print(f"  remote machine? forward the port: ssh -L {port}:127.0.0.1:{port} <host>, "
+                  f"then open http://127.0.0.1:{port}", flush=True)
 
     try:
         serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
