@@ -40,7 +40,8 @@ class OverlayPanel:
                 self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value="intensity",
                                                  hint="Colour the lidar points by their intensity or their depth")
                 self.point_size = gui.add_slider("Point size", 1, 8, 1, 2, hint="Disc diameter in pixels")
-                self.opacity = gui.add_slider("Opacity", 0.0, 1.0, 0.05, 0.85)
+                self.opacity = gui.add_slider("Opacity", 0.0, 1.0, 0.05, 0.8,
+                                              hint="Lower it to see the event map through the points")
                 self.contrast = gui.add_slider("Contrast", 0.2, 6.0, 0.1, 1.0, hint="Brightens the event map")
                 self.map_mode = gui.add_dropdown(
                     "Map", MAP_MODES, initial_value="raw",
