@@ -190,6 +190,11 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
 
     mi_seed, per_seed = final.mi(seed)
     mi_res, per_res = final.mi(current)
+    if mi_res < mi_seed and not cancelled:
+        # The smooth objective climbed somewhere the paper's MI scores below the seed (seen on
+        # street scenes of frame cameras, where the landscape misleads): never hand back worse.
+        current, mi_res, per_res = seed, mi_seed, per_seed
+        message = "no extrinsic within the bounds scored above the seed; the seed is kept"
     return CalibrationResult(
         extrinsic=current,
         seed=seed,

@@ -156,9 +156,12 @@ def distort(x: np.ndarray, y: np.ndarray, camera: CameraModel, jacobian: bool = 
         one = np.ones_like(x)
         zero = np.zeros_like(x)
         return x, y, (one, zero, zero, one)
-    if camera.model == "equidistant":
-        return _distort_equidistant(x, y, D.astype(x.dtype), jacobian)
-    return _distort_radtan(x, y, D.astype(x.dtype), jacobian)
+    # far outside the lens's field of view the polynomial overflows: such points come out
+    # non-finite, and in_image() rejects them
+    with np.errstate(over="ignore", invalid="ignore"):
+        if camera.model == "equidistant":
+            return _distort_equidistant(x, y, D.astype(x.dtype), jacobian)
+        return _distort_radtan(x, y, D.astype(x.dtype), jacobian)
 
 
 def project_points(points_cam: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
@@ -202,8 +205,9 @@ def project_with_jacobian(
     K = camera.K.astype(P.dtype)
     fx, fy, s, cx, cy = K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]
     uv = np.empty((P.shape[0], 2), dtype=P.dtype)
-    uv[:, 0] = fx * xd + s * yd + cx
-    uv[:, 1] = fy * yd + cy
+    with np.errstate(over="ignore", invalid="ignore"):
+        uv[:, 0] = fx * xd + s * yd + cx
+        uv[:, 1] = fy * yd + cy
     if not jacobian:
         return uv, in_front, None
     # d(xd, yd)/d(x, y) from Jd, then d(x, y)/d(X, Y, Z) = [[1/Z, 0, -x/Z], [0, 1/Z, -y/Z]].
