@@ -165,12 +165,17 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
     if settings.translation_bound == 0:
         free[:3] = False
 
+    # the seed's score first: a cancelled run then only has its result left to score
+    mi_seed, per_seed = final.mi(seed)
     history: list[tuple[int, float, int]] = []
     count = 0
     current = seed
     cancelled = False
     message = ""
     for k, stage in enumerate(stages):
+        if cancel is not None and cancel.is_set():
+            cancelled, message = True, "cancelled"
+            break
         obj = stack.with_sigma(stage.sigma, stage.scale).objective(seed, start=current, max_points=stage.max_points)
         tracker = _Tracker(obj, scale, free, k, len(stages), settings.max_iterations, on_progress, cancel, t0, count, history)
         try:
@@ -188,8 +193,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         if cancelled:
             break
 
-    mi_seed, per_seed = final.mi(seed)
-    mi_res, per_res = final.mi(current)
+    mi_res, per_res = (mi_seed, per_seed) if current is seed else final.mi(current)
     if mi_res < mi_seed and not cancelled:
         # The smooth objective climbed somewhere the paper's MI scores below the seed (seen on
         # street scenes of frame cameras, where the landscape misleads): never hand back worse.

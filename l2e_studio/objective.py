@@ -128,6 +128,26 @@ class SceneStack:
             bounds=np.concatenate([[0], np.cumsum(counts)]),
         )
 
+    def subset(self, scenes: Sequence[int] | np.ndarray) -> "SceneStack":
+        """The stack of only some scenes (indices or a boolean mask), in their original order."""
+        idx = np.asarray(scenes)
+        idx = np.flatnonzero(idx) if idx.dtype == bool else np.unique(idx)
+        renumber = np.full(self.n_scenes, -1, dtype=np.int32)
+        renumber[idx] = np.arange(idx.size, dtype=np.int32)
+        keep = renumber[self.scene_of] >= 0
+        scene_of = renumber[self.scene_of[keep]]
+        return replace(
+            self,
+            names=tuple(self.names[i] for i in idx),
+            points=np.ascontiguousarray(self.points[:, keep]),
+            l_bins=self.l_bins[keep],
+            scene_of=scene_of,
+            bounds=np.concatenate([[0], np.cumsum(np.bincount(scene_of, minlength=idx.size))]),
+            maps=self.maps[idx],
+            map_kinds=tuple(self.map_kinds[i] for i in idx),
+            raw_maps=tuple(self.raw_maps[i] for i in idx),
+        )
+
     def thinned(self, max_points: int | None) -> "SceneStack":
         """At most ``max_points`` points: every k-th in scan order, so the sample stays even."""
         if max_points is None or self.n_points <= max_points:
@@ -182,17 +202,25 @@ class SceneStack:
         else:
             out[a:b] = np.where(inside, self.l_bins[a:b] * N_BINS + e_bins, N_BINS * N_BINS)
 
-    def mi(self, extrinsic: Extrinsic, per_scene: bool = True) -> tuple[float, np.ndarray]:
-        """The paper's MI at ``extrinsic``: (all scenes pooled, per scene)."""
-        with single_threaded_blas():
-            return self._mi(extrinsic, per_scene)
+    def mi(
+        self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray]:
+        """The paper's MI at ``extrinsic``: (the scenes pooled, per scene; NaN without ``per_scene``).
 
-    def _mi(self, extrinsic: Extrinsic, per_scene: bool) -> tuple[float, np.ndarray]:
-        joints = self.joint_histograms(extrinsic, per_scene)
-        total = mi_from_joint_histogram(joints.sum(axis=0))
-        if not per_scene:
-            return total, np.full(self.n_scenes, np.nan)
-        return total, np.array([mi_from_joint_histogram(j) for j in joints])
+        ``pooled`` (a boolean mask over the scenes) picks the scenes whose histograms are summed
+        for the first value; by default all. NaN when the mask picks none.
+        """
+        with single_threaded_blas():
+            split = per_scene or pooled is not None
+            joints = self.joint_histograms(extrinsic, per_scene=split)
+            if pooled is None:
+                total = mi_from_joint_histogram(joints.sum(axis=0))
+            else:
+                mask = np.asarray(pooled, dtype=bool)
+                total = mi_from_joint_histogram(joints[mask].sum(axis=0)) if mask.any() else float("nan")
+            if not per_scene:
+                return total, np.full(self.n_scenes, np.nan)
+            return total, np.array([mi_from_joint_histogram(j) for j in joints])
 
     def in_image_fraction(self, extrinsic: Extrinsic) -> np.ndarray:
         """Per scene, the fraction of stacked points that land inside the image."""

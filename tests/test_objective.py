@@ -102,3 +102,18 @@ def test_coarse_stack_uses_a_scaled_camera(small_synth):
     # the objective on the coarse maps still peaks near the truth
     obj = coarse.objective(truth)
     assert obj.value(np.zeros(6)) > obj.value(np.array([0, 0, 0, 0, np.radians(2.0), 0]))
+
+
+def test_pooled_mask_and_subset_agree_with_a_stack_of_those_scenes(small_synth):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    picked = [0, 2]
+    alone = SceneStack.build([scenes[i] for i in picked], camera, sigma=2.0)
+    mask = np.isin(np.arange(len(scenes)), picked)
+    total, per_scene = stack.mi(truth, pooled=mask)
+    assert total == pytest.approx(alone.mi(truth, per_scene=False)[0], rel=1e-12)
+    assert np.allclose(per_scene[picked], alone.mi(truth)[1], rtol=1e-12)
+    sub = stack.subset(mask)
+    assert sub.names == ("scene_000", "scene_002") and sub.maps.shape[0] == 2
+    assert sub.mi(truth)[0] == pytest.approx(total, rel=1e-12)
+    assert np.isnan(stack.mi(truth, pooled=np.zeros(len(scenes), bool))[0])

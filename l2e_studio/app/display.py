@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..objective import prepare_map
+from ..objective import CLIP, prepare_map
 from ..scenes import Scene
 from .overlay import grey_rgb, intensity_colors, normalise_map
 
@@ -40,7 +40,7 @@ class SceneDisplay:
                 if mode == "raw":
                     self._norm[key] = normalise_map(self.scene.event_map, self.scene.map_kind)
                 else:
-                    clip = 127.0 if self.scene.map_kind == "events" else 255.0
+                    clip = CLIP[self.scene.map_kind]
                     m = prepare_map(self.scene.event_map, sigma=sigma, clip=clip)
                     self._norm[key] = (m / max(float(m.max()), 1e-6)).astype(np.float32)
             return self._norm[key]

@@ -2,7 +2,7 @@
 
 One :class:`~l2e_studio.objective.SceneStack` of all loaded scenes is built once (and again
 when the smoothing sigma changes); one evaluation gives the per-scene values and the joint
-histograms that the engine pools into the included scenes' MI. No MI arithmetic lives here.
+histograms, pooled by the engine over the included scenes. No MI arithmetic lives here.
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import numpy as np
 
 from ..camera import CameraModel
 from ..geometry import Extrinsic
-from ..mi import mi_from_joint_histogram
 from ..objective import SceneStack
 from ..scenes import Scene
 
@@ -52,6 +51,11 @@ class MiReadout:
     def sigma(self) -> float:
         return self._stack.sigma
 
+    @property
+    def stack(self) -> SceneStack:
+        """The current stack (immutable, so other threads may use it; the optimiser does)."""
+        return self._stack
+
     def set_sigma(self, sigma: float) -> None:
         with self._lock:
             self._stack = self._stack.with_sigma(float(sigma))
@@ -60,11 +64,5 @@ class MiReadout:
         """MI of each scene and of the ``included`` scenes' histograms pooled together."""
         mask = np.asarray(included, dtype=bool)
         with self._lock:
-            stack = self._stack
-            if mask.all():
-                total, per_scene = stack.mi(extrinsic)
-            else:
-                joints = stack.joint_histograms(extrinsic)
-                per_scene = np.array([mi_from_joint_histogram(j) for j in joints])
-                total = mi_from_joint_histogram(joints[mask].sum(axis=0)) if mask.any() else float("nan")
+            total, per_scene = self._stack.mi(extrinsic, pooled=mask)
         return MiReading(extrinsic, float(total), np.asarray(per_scene, float), tuple(bool(b) for b in mask))

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
 import viser
 
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
@@ -166,7 +167,6 @@ class App:
         """Start an optimisation of the included scenes from the current extrinsic."""
         run_id = self.state.begin_run()
         snap = self.state.snapshot()
-        scenes = [self.scene_set.scenes[i] for i, flag in enumerate(snap.included) if flag]
         cancel = threading.Event()
         self._cancel = cancel
 
@@ -175,7 +175,9 @@ class App:
 
         def work() -> None:
             try:
-                result = calibrate(scenes, self.camera, snap.extrinsic, settings, on_progress, cancel)
+                # the readout's stack already holds every scene: no second load or stacking
+                stack = self.readout.stack.subset(np.asarray(snap.included, dtype=bool))
+                result = calibrate(stack, None, snap.extrinsic, settings, on_progress, cancel)
                 self.state.finish_run(run_id, result)
             except Exception as exc:  # shown to the user; the app keeps running
                 log.exception("optimisation failed")
