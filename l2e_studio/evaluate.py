@@ -88,8 +88,8 @@ def assess(
         rot, trans = 0.0, 0.0
         half = max(1, stack.n_scenes // 2)
         for _ in range(subsets):
-            keep = np.isin(stack.scene_of, rng.choice(stack.n_scenes, half, replace=False))
-            sub = calibrate(stack.select(keep), None, seed, settings, cancel=cancel)
+            chosen = rng.choice(stack.n_scenes, half, replace=False)
+            sub = calibrate(stack.subset(chosen), None, seed, settings, cancel=cancel)
             if sub.cancelled:
                 break
             deg, m = sub.extrinsic.error_to(result)
