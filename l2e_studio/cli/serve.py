@@ -21,7 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=Path, default=None, help="seed extrinsic file (overrides the folder's)")
     parser.add_argument("--camera", type=Path, default=None, help="intrinsics file (overrides the folder's)")
     parser.add_argument("--out", type=Path, default=None,
-                        help="folder for result and seed files (default: SCENES/results)")
+                        help="folder for result and seed files (default: SCENES/results; ./l2e_results for the "
+                             "embedded sample, which lives in the source tree)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
                   f"then open http://127.0.0.1:{port}", flush=True)
 
     try:
-        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
+        out = args.out if args.out is not None or args.scenes is not None else Path("l2e_results")
+        serve(scene_set, host=args.host, port=args.port, out_dir=out, on_ready=ready)
     except OSError as exc:
         raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
     return 0
