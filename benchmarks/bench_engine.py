@@ -22,9 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from l2e_studio.calibrate import CalibrationSettings, calibrate
+from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.geometry import Extrinsic
-from l2e_studio.objective import SceneStack
 from l2e_studio.scenes import load_scene_folder
 from l2e_studio.synth import SynthConfig, config_with, read_truth, write_dataset
 
@@ -79,8 +78,7 @@ def main() -> None:
 
     settings = CalibrationSettings(method=args.method)
     t = time.perf_counter()
-    stack = SceneStack.build(scene_set.scenes, scene_set.camera, settings.sigma, scene_set.seed,
-                             2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+    stack = stack_scenes(scene_set.scenes, scene_set.camera, scene_set.seed, settings)
     print(f"stack: {stack.n_points} points that can reach the image, built in {time.perf_counter() - t:.2f} s")
     print(f"one MI evaluation (paper estimator, all scenes pooled): {1000 * timed(lambda: stack.mi(truth, per_scene=False)):.1f} ms")
     print(f"  with per-scene MI as well: {1000 * timed(lambda: stack.mi(truth)):.1f} ms")
@@ -114,7 +112,7 @@ def main() -> None:
         print("\nscenes  points  eval_ms  optimisation_s")
         for n in (5, 10, 20, 40, 80):
             sub = load_scene_folder(dataset(max(n, args.scenes)) if n > args.scenes else folder)
-            st = SceneStack.build(sub.scenes[:n], sub.camera, settings.sigma, sub.seed, 0.4, 20.0)
+            st = stack_scenes(sub.scenes[:n], sub.camera, sub.seed, settings)
             ev = timed(lambda: st.mi(truth, per_scene=False), 3)
             res = calibrate(st, None, perturbed_seed(truth, np.random.default_rng(n)), settings)
             print(f"{n:6d} {st.n_points:8d} {1000 * ev:7.1f} {res.seconds:8.2f}", flush=True)

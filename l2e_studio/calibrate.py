@@ -123,10 +123,6 @@ class CalibrationResult:
     message: str = ""
     stages: tuple[Stage, ...] = ()  # the schedule that ran
 
-    @property
-    def improved(self) -> bool:
-        return self.mi_result > self.mi_seed
-
 
 class _Cancelled(Exception):
     pass
@@ -149,15 +145,22 @@ def calibrate(
         return _calibrate(scenes, camera, seed, settings, on_progress, cancel)
 
 
+def stack_scenes(
+    scenes: Sequence[Scene], camera: CameraModel, seed: Extrinsic, settings: CalibrationSettings = CalibrationSettings()
+) -> SceneStack:
+    """The scenes stacked for :func:`calibrate`: points that cannot reach the image from
+    anywhere within twice the bounds around ``seed`` are left out."""
+    return SceneStack.build(scenes, camera, settings.sigma, seed, 2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+
+
 def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> CalibrationResult:
     t0 = time.perf_counter()
     if isinstance(scenes, SceneStack):
         stack = scenes
+    elif camera is None:
+        raise ValueError("camera is required when scenes are not stacked")
     else:
-        if camera is None:
-            raise ValueError("camera is required when scenes are not stacked")
-        reach_m = 2 * settings.translation_bound
-        stack = SceneStack.build(scenes, camera, settings.sigma, seed, reach_m, 2 * settings.rotation_bound_deg)
+        stack = stack_scenes(scenes, camera, seed, settings)
     final = stack.with_sigma(settings.sigma)
     stages = settings.schedule(stack.camera.width)
     scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
@@ -177,7 +180,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
             cancelled, message = True, "cancelled"
             break
         obj = stack.with_sigma(stage.sigma, stage.scale).objective(seed, start=current, max_points=stage.max_points)
-        tracker = _Tracker(obj, scale, free, k, len(stages), settings.max_iterations, on_progress, cancel, t0, count, history)
+        tracker = _Tracker(obj, scale, free, k, len(stages), on_progress, cancel, t0, count, history)
         try:
             res = _run_stage(obj, tracker, settings, final=k == len(stages) - 1)
             message = str(res.message)
@@ -220,9 +223,12 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
 class _Tracker:
     """Wraps the objective for scipy: scaling, fixed axes, counting, best point, progress, cancel."""
 
-    def __init__(self, obj: SmoothObjective, scale, free, stage, stages, max_it, on_progress, cancel, t0, count, history):
+    #: A stage typically takes this many evaluations; progress approaches the stage's end by it.
+    TYPICAL_EVALUATIONS = 25.0
+
+    def __init__(self, obj: SmoothObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history):
         self.obj, self.scale, self.free = obj, scale, free
-        self.stage, self.stages, self.max_it = stage, stages, max_it
+        self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count, self.history = count, history
         self.start_count = count
@@ -238,15 +244,17 @@ class _Tracker:
         delta[self.free] = np.asarray(z) * self.scale[self.free]
         return delta
 
-    def _record(self, delta: np.ndarray, mi: float) -> None:
+    def _check_cancel(self) -> None:
         if self.cancel is not None and self.cancel.is_set():
             raise _Cancelled
+
+    def _record(self, delta: np.ndarray, mi: float) -> None:
         self.count += 1
         self.history.append((self.count, mi, self.stage))
         if mi > self.best_mi:
             self.best_mi, self.best_delta = mi, delta.copy()
         if self.on_progress is not None:
-            done = min(1.0, (self.count - self.start_count) / (8.0 * self.max_it ** 0.5 * 3))
+            done = 1.0 - np.exp(-(self.count - self.start_count) / self.TYPICAL_EVALUATIONS)
             self.on_progress(
                 Progress(
                     evaluations=self.count,
@@ -261,16 +269,14 @@ class _Tracker:
             )
 
     def fun(self, z: np.ndarray) -> float:
-        if self.cancel is not None and self.cancel.is_set():
-            raise _Cancelled
+        self._check_cancel()
         delta = self.full(z)
         mi = self.obj.value(delta)
         self._record(delta, mi)
         return -mi
 
     def fun_and_grad(self, z: np.ndarray) -> tuple[float, np.ndarray]:
-        if self.cancel is not None and self.cancel.is_set():
-            raise _Cancelled
+        self._check_cancel()
         delta = self.full(z)
         mi, g = self.obj.value_and_grad(delta)
         self._record(delta, mi)

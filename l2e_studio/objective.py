@@ -53,7 +53,6 @@ class SceneStack:
     points: np.ndarray  # (3, N) float32, lidar frame, sorted by scene
     l_bins: np.ndarray  # (N,) int32, lidar intensity 0..255
     scene_of: np.ndarray  # (N,) int32, index of each point's scene
-    bounds: np.ndarray  # (S+1,) start of each scene's points
     maps: np.ndarray  # (S, H+2, W+2) float32, prepared maps with a one-pixel zero border
     map_kinds: tuple[str, ...]
     raw_maps: tuple[np.ndarray, ...]  # the unprepared maps, for re-smoothing
@@ -88,7 +87,6 @@ class SceneStack:
             pts.append(p[keep])
             bins.append(np.clip(np.rint(sc.intensity[keep]), 0, N_BINS - 1).astype(np.int32))
             owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
-        counts = np.array([len(b) for b in bins])
         raw = tuple(np.asarray(sc.event_map, dtype=np.float32) for sc in scenes)
         kinds = tuple(sc.map_kind for sc in scenes)
         return cls(
@@ -97,7 +95,6 @@ class SceneStack:
             points=np.ascontiguousarray(np.concatenate(pts).T),
             l_bins=np.concatenate(bins),
             scene_of=np.concatenate(owner),
-            bounds=np.concatenate([[0], np.cumsum(counts)]),
             maps=_stack_maps(raw, kinds, sigma),
             map_kinds=kinds,
             raw_maps=raw,
@@ -118,14 +115,11 @@ class SceneStack:
     def select(self, mask: np.ndarray) -> "SceneStack":
         """Keep the points where ``mask`` is true (the maps are shared, not copied)."""
         mask = np.asarray(mask, dtype=bool)
-        scene_of = self.scene_of[mask]
-        counts = np.bincount(scene_of, minlength=self.n_scenes)
         return replace(
             self,
             points=np.ascontiguousarray(self.points[:, mask]),
             l_bins=self.l_bins[mask],
-            scene_of=scene_of,
-            bounds=np.concatenate([[0], np.cumsum(counts)]),
+            scene_of=self.scene_of[mask],
         )
 
     def subset(self, scenes: Sequence[int] | np.ndarray) -> "SceneStack":
@@ -135,14 +129,12 @@ class SceneStack:
         renumber = np.full(self.n_scenes, -1, dtype=np.int32)
         renumber[idx] = np.arange(idx.size, dtype=np.int32)
         keep = renumber[self.scene_of] >= 0
-        scene_of = renumber[self.scene_of[keep]]
         return replace(
             self,
             names=tuple(self.names[i] for i in idx),
             points=np.ascontiguousarray(self.points[:, keep]),
             l_bins=self.l_bins[keep],
-            scene_of=scene_of,
-            bounds=np.concatenate([[0], np.cumsum(np.bincount(scene_of, minlength=idx.size))]),
+            scene_of=renumber[self.scene_of[keep]],
             maps=self.maps[idx],
             map_kinds=tuple(self.map_kinds[i] for i in idx),
             raw_maps=tuple(self.raw_maps[i] for i in idx),
@@ -221,12 +213,6 @@ class SceneStack:
             if not per_scene:
                 return total, np.full(self.n_scenes, np.nan)
             return total, np.array([mi_from_joint_histogram(j) for j in joints])
-
-    def in_image_fraction(self, extrinsic: Extrinsic) -> np.ndarray:
-        """Per scene, the fraction of stacked points that land inside the image."""
-        _, inside = self.project(extrinsic)
-        n_in = np.bincount(self.scene_of[inside], minlength=self.n_scenes)
-        return n_in / np.maximum(np.diff(self.bounds), 1)
 
     # --- the optimiser's objective -------------------------------------------------------
     def objective(

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from l2e_studio.camera import CameraModel
-from l2e_studio.geometry import Extrinsic, project_points
+from l2e_studio.geometry import project_points
 from l2e_studio.mi import mutual_information
 from l2e_studio.objective import SceneStack, prepare_map
 from l2e_studio.scenes import Scene

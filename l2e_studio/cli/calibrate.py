@@ -11,12 +11,11 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from ..calibrate import METHODS, CalibrationSettings, calibrate
+from ..calibrate import METHODS, CalibrationSettings, calibrate, stack_scenes
 from ..errors import InputError
 from ..evaluate import assess
 from ..export import write_result
 from ..geometry import Extrinsic
-from ..objective import SceneStack
 from ..samples import sample_scenes_dir
 from ..scenes import load_scene_folder
 
@@ -67,8 +66,7 @@ def run(args: argparse.Namespace) -> int:
     t_loaded = time.perf_counter()
 
     seed = scene_set.seed
-    stack = SceneStack.build(scene_set.scenes, scene_set.camera, settings.sigma, seed,
-                             2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+    stack = stack_scenes(scene_set.scenes, scene_set.camera, seed, settings)
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("optimising", total=1.0)
 
