@@ -259,7 +259,6 @@ class SmoothObjective:
         self._A_l = kernel_matrix(self.h_l)
         self._A_e = kernel_matrix(self.h_e)
         self._H_l = entropy(self._A_l @ (hist_l / self.n))
-        self.evaluations = 0
 
     def extrinsic(self, delta: np.ndarray) -> Extrinsic:
         return self.base.perturbed(delta[:3], delta[3:])
@@ -267,14 +266,12 @@ class SmoothObjective:
     def value(self, delta: np.ndarray) -> float:
         """MI (nats) at ``base`` corrected by ``delta``."""
         e, _ = self._sample(delta, jacobian=False)
-        self.evaluations += 1
         return self._mi_and_weights(self._soft_histogram(e), need_weights=False)[0]
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
         """MI and its gradient with respect to ``delta``."""
         delta = np.asarray(delta, dtype=np.float64)
         e, de_ddelta = self._sample(delta, jacobian=True)
-        self.evaluations += 1
         mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
         # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
         j = self._l_offset + e.astype(np.int32)
