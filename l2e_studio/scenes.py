@@ -25,6 +25,10 @@ import numpy as np
 from .camera import CameraModel
 from .errors import InputError
 from .geometry import Extrinsic
+from .io.cameras import load_rig, load_seed
+from .io.events import EVENT_SUFFIXES
+from .io.lidar import LIDAR_SUFFIXES, load_lidar
+from .io.maps import MAP_SUFFIXES, load_map
 
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
@@ -73,10 +77,7 @@ class SceneSet:
 
 def find_scene_files(folder: Path) -> tuple[dict[str, tuple[Path, Path]], list[str]]:
     """Pair map files with lidar files by stem: ``({stem: (map, lidar)}, unpaired messages)``."""
-    from .io.lidar import LIDAR_SUFFIXES
-    from .io.maps import MAP_SUFFIXES
-
-    maps = _by_stem(_first_dir(folder, MAP_DIRS), MAP_SUFFIXES + _event_suffixes())
+    maps = _by_stem(_first_dir(folder, MAP_DIRS), MAP_SUFFIXES + EVENT_SUFFIXES)
     scans = _by_stem(_first_dir(folder, LIDAR_DIRS), LIDAR_SUFFIXES)
     pairs = {stem: (maps[stem], scans[stem]) for stem in sorted(maps.keys() & scans.keys())}
     unpaired = [f"{maps[s]}: no lidar scan with stem {s!r}" for s in sorted(maps.keys() - scans.keys())]
@@ -97,8 +98,6 @@ def load_scene_folder(
     no scene loads; a single bad scene is recorded in ``failures`` instead.
     ``on_scene(i, n, name)`` is called before each scene is read (for progress bars).
     """
-    from .io.cameras import load_rig, load_seed
-
     root = Path(folder)
     if not root.is_dir():
         raise InputError(root, "scene folder does not exist" if not root.exists() else "not a folder")
@@ -140,8 +139,6 @@ def load_scene(
     name: str, map_path: Path, lidar_path: Path, camera: CameraModel | None, cache_root: Path | None = None
 ) -> Scene:
     """Read one scene; checks the map size against ``camera`` when it is known."""
-    from .io.maps import load_map
-
     w, h = (camera.width, camera.height) if camera else (None, None)
     event_map, kind = load_map(map_path, width=w, height=h)
     points, intensity = _load_scan_cached(lidar_path, cache_root)
@@ -149,14 +146,6 @@ def load_scene(
 
 
 # --- internals ------------------------------------------------------------------------------
-
-
-def _event_suffixes() -> tuple[str, ...]:
-    try:
-        from .io.events import EVENT_SUFFIXES
-    except ImportError:  # raw event decoding not available
-        return ()
-    return tuple(EVENT_SUFFIXES)
 
 
 def _first_dir(root: Path, names: tuple[str, ...]) -> Path | None:
@@ -190,8 +179,6 @@ def _find_rig(root: Path) -> Path:
 
 
 def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, np.ndarray]:
-    from .io.lidar import load_lidar
-
     cache_file = None
     if cache_root is not None:
         st = path.stat()
