@@ -35,15 +35,12 @@ class MiReading:
 
 
 class MiReadout:
-    """Evaluates MI for the GUI from one thread at a time (the stack is not shared)."""
+    """Evaluates MI for the GUI; a lock orders reads against sigma changes."""
 
     def __init__(self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0) -> None:
-        self._scenes = list(scenes)
-        self._camera = camera
-        self._reference = reference
         self._lock = threading.Lock()
         self._stack = SceneStack.build(
-            self._scenes, camera, sigma, reference=reference,
+            scenes, camera, sigma, reference=reference,
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
         )
 

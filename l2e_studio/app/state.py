@@ -17,9 +17,6 @@ import numpy as np
 
 from ..geometry import Extrinsic
 
-RUN_STATES = ("idle", "running", "done", "cancelled", "failed")
-
-
 @dataclass(frozen=True)
 class RunState:
     """Where the optimisation stands. ``history`` holds (evaluation, MI, best MI) rows."""
@@ -103,10 +100,6 @@ class SessionState:
                 self.result,
                 self.follow_best,
             )
-
-    def included_indices(self) -> list[int]:
-        with self._lock:
-            return [i for i, flag in enumerate(self.included) if flag]
 
     # --- the extrinsic ---------------------------------------------------------------------
     def set_extrinsic(self, extrinsic: Extrinsic) -> int:

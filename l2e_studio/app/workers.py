@@ -19,10 +19,9 @@ log = logging.getLogger(__name__)
 class LatestWorker:
     """Run ``job()`` in a daemon thread after each :meth:`poke`, coalescing bursts."""
 
-    def __init__(self, name: str, job: Callable[[], None], min_interval: float = 0.0) -> None:
+    def __init__(self, name: str, job: Callable[[], None]) -> None:
         self.name = name
         self._job = job
-        self._min_interval = float(min_interval)
         self._wake = threading.Event()
         self._idle = threading.Event()
         self._idle.set()
@@ -65,8 +64,6 @@ class LatestWorker:
                 log.exception("%s worker failed", self.name)
             self.runs += 1
             self.last_seconds = time.perf_counter() - t0
-            if self._min_interval > self.last_seconds:
-                time.sleep(self._min_interval - self.last_seconds)
             with self._lock:
                 if not self._pending:
                     self._idle.set()

@@ -29,10 +29,9 @@ class ResultPanel:
                                    hint=f"Write a result file and a before/after PNG into {app.out_dir}")
         self.saved = gui.add_markdown("")
         self.table = gui.add_markdown("")
-        self.accept.on_click(lambda event: self._accept(event))
+        self.accept.on_click(self._accept)
         self.discard.on_click(lambda event: app.discard_result())
         self.save.on_click(self._on_save)
-        self.saved_paths: list = []
 
     def _accept(self, event) -> None:
         self.app.accept_result()
