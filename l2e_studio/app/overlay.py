@@ -16,12 +16,10 @@ import numpy as np
 
 from ..camera import CameraModel
 from ..geometry import Extrinsic, in_image, project_points
+from ..objective import CLIP
 
 COLOR_MODES = ("intensity", "depth")
 COMPARE_MODES = ("side by side", "swipe", "blend")
-
-#: Event maps are clipped here before display, as the method clips them before scoring.
-EVENT_CLIP = 127.0
 
 
 @dataclass(frozen=True)
@@ -64,7 +62,7 @@ def color_table(name: str = "turbo") -> np.ndarray:
 def normalise_map(event_map: np.ndarray, map_kind: str = "events") -> np.ndarray:
     """Scale a raw event map (counts) or grey image to float32 0..1 for display.
 
-    Event counts are clipped at 127 like the objective does, then divided by their 99.5th
+    Event counts are clipped like the objective clips them (``CLIP``), then divided by their 99.5th
     percentile over firing pixels so that sparse maps are still visible; grey images are
     divided by their maximum.
     """
@@ -73,7 +71,7 @@ def normalise_map(event_map: np.ndarray, map_kind: str = "events") -> np.ndarray
         raise ValueError(f"event map must be 2-D, got shape {m.shape}")
     m = np.nan_to_num(m, nan=0.0, posinf=0.0, neginf=0.0)
     if map_kind == "events":
-        m = np.clip(m, 0.0, EVENT_CLIP)
+        m = np.clip(m, 0.0, CLIP["events"])
         firing = m[m > 0]
         top = float(np.percentile(firing, 99.5)) if firing.size else 1.0
     else:

@@ -14,7 +14,7 @@ How the kind is decided when ``kind`` is not given: raw event files are ``"event
 and colour images (3 or 4 channels) are ``"image"``; a single-channel image is ``"events"``
 when its file name or one of its two parent folders contains "event" (the reference layout
 ``DIR/event/<stem>.png``), ``"image"`` otherwise. Values are returned unclipped and
-unsmoothed: :func:`l2e_studio.mi.prepare_map` does that.
+unsmoothed: :func:`l2e_studio.objective.prepare_map` does that.
 """
 
 from __future__ import annotations
