@@ -154,12 +154,12 @@ def _hdf5(path: Path, chunk: int) -> Iterator[Arrays]:
             if cand and cand not in f:
                 continue
             g = f[cand] if cand else f
-            if isinstance(g, h5py.Group) and all(k in g for k in ("x", "y")) and _find(g, _T_NAMES) and _find(g, _P_NAMES):
+            if isinstance(g, h5py.Group) and all(k in g for k in ("x", "y")) and _pick(g, _T_NAMES) and _pick(g, _P_NAMES):
                 group = g
                 break
         if group is not None:
             x_ds, y_ds = group["x"], group["y"]
-            t_ds, p_ds = group[_find(group, _T_NAMES)], group[_find(group, _P_NAMES)]
+            t_ds, p_ds = group[_pick(group, _T_NAMES)], group[_pick(group, _P_NAMES)]
             n = t_ds.shape[0]
             if not (x_ds.shape[0] == y_ds.shape[0] == p_ds.shape[0] == n):
                 raise InputError(path, "HDF5 event arrays x, y, t, p have different lengths")
@@ -190,11 +190,8 @@ def _hdf5(path: Path, chunk: int) -> Iterator[Arrays]:
             raise InputError(path, f"cannot read the event table ({exc}); Prophesee ECF-compressed HDF5 needs its plugin") from None
 
 
-def _find(group, names) -> str | None:
-    return next((n for n in names if n in group), None)
-
-
 def _pick(names, wanted) -> str | None:
+    """The first of ``wanted`` that ``names`` (field names, npz files, an HDF5 group) holds."""
     return next((n for n in wanted if n in names), None)
 
 

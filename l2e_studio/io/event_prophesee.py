@@ -334,12 +334,10 @@ def encode_evt3(x, y, t_us, p, width: int, height: int, vectorize: bool = True) 
             start = np.flatnonzero(~same)
             x0 = x[start][group]
             over = (x - x0) >= 12
-        counts = np.bincount(group)
-        is_vec_group = counts >= 3
+        is_vec_group = np.bincount(group) >= 3
     else:
         group = np.arange(n)
         start = np.arange(n)
-        counts = np.ones(n, np.int64)
         is_vec_group = np.zeros(n, bool)
     first = np.zeros(n, bool)
     first[start] = True
