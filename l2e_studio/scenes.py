@@ -191,6 +191,8 @@ def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, 
             except (OSError, ValueError):
                 pass  # a damaged cache entry is rebuilt below
     scan = load_lidar(path)
+    if not scan.has_intensity:
+        raise InputError(path, "has no intensity field (only x, y, z); the MI needs lidar intensities")
     if cache_file is not None:
         _write_cache(cache_file, np.column_stack([scan.points, scan.intensity]).astype(np.float32))
     return scan.points, scan.intensity

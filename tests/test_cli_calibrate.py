@@ -76,10 +76,11 @@ def test_missing_folder(tmp_path):
     [
         (lambda d: (d / "lidar/scene_000.txt").write_text(""), "scene_000.txt"),
         (lambda d: (d / "lidar/scene_000.txt").write_text("nan,nan,nan,nan\n" * 50), "scene_000.txt"),
+        (lambda d: (d / "lidar/scene_000.txt").write_text("1.0,2.0,3.0\n" * 50), "no intensity field"),
         (lambda d: (d / "event/scene_000.png").write_bytes(b"\x89PNG\r\n\x1a\n garbage"), "scene_000.png"),
         (lambda d: (d / "event/scene_000.png").write_bytes((d / "event/scene_000.png").read_bytes()[:200]), "scene_000.png"),
     ],
-    ids=["empty-cloud", "nan-cloud", "corrupt-png", "truncated-png"],
+    ids=["empty-cloud", "nan-cloud", "no-intensity", "corrupt-png", "truncated-png"],
 )
 def test_bad_scene_alone_fails_and_among_others_is_skipped(scene_dir_copy, tmp_path, damage, fragment):
     damage(scene_dir_copy)
