@@ -12,7 +12,7 @@ Layout:
 Per the paper: every event counts regardless of polarity, over ``--window`` seconds (default
 3) from ``--start`` seconds into the recording, clipped to [0, 127]; ``--hot-pixels`` zeroes
 pixels firing far above the rest. The sensor size comes from the file, ``--size WxH``, or
-``DIR/camera.yaml``/``config`` when the file does not say.
+``DIR/camera.yaml`` when the file does not say.
 """
 
 from __future__ import annotations
@@ -53,25 +53,22 @@ def find_raw_files(folder: Path) -> tuple[list[Path], list[Path]]:
 
 
 def _is_map_npy(path: Path) -> bool:
+    """A 2D map saved as .npy (the workbench reads it as a map), not raw events."""
+    from ..io.maps import is_map_npy
+
     if path.suffix.lower() != ".npy":
         return False
-    import numpy as np
-
     try:
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (ValueError, OSError):
+        return is_map_npy(path)
+    except InputError:  # unreadable: left to the accumulation to report
         return False
-    return arr.dtype.names is None and arr.ndim == 2 and arr.shape[1] > 8
 
 
 def _size(args: argparse.Namespace, folder: Path) -> tuple[int | None, int | None]:
     from ..io.events import parse_size
 
     if args.size:
-        try:
-            return parse_size(args.size)
-        except ValueError as exc:
-            raise InputError(None, str(exc)) from None
+        return parse_size(args.size)
     from ..io.cameras import load_rig
 
     for name in ("camera.yaml", "camera.yml"):
@@ -92,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.progress import Progress
 
-    from ..io.events import accumulate_events_cached
+    from ..io.events import EVENT_SUFFIXES, accumulate_events_cached
     from ..io.maps import write_map_png
 
     folder: Path = args.folder
@@ -100,8 +97,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(folder, "scene folder not found")
     to_png, in_place = find_raw_files(folder)
     if not to_png and not in_place:
-        raise InputError(folder, "no raw event files in events_raw/ or event/ "
-                         "(.raw, .dat, .aedat4, .h5, .hdf5, .npz, .npy, .txt)")
+        raise InputError(folder, f"no raw event files in events_raw/ or event/ ({', '.join(EVENT_SUFFIXES)})")
     width, height = _size(args, folder)
     console = Console(stderr=True)
     written = cached = skipped = failed = 0

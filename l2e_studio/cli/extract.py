@@ -55,12 +55,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.list:
             raise InputError(None, "give --out DIR to extract scenes (topics listed above)")
         return 0
-    width = height = None
-    if args.size:
-        try:
-            width, height = parse_size(args.size)
-        except ValueError as exc:
-            raise InputError(None, str(exc)) from None
+    width, height = parse_size(args.size) if args.size else (None, None)
     settings = ExtractSettings(args.event_topic, args.lidar_topic, args.slice, args.window, args.start,
                                max(1, args.scans), args.intensity_field, width, height)
     written = []

@@ -308,8 +308,8 @@ def _write_cache(cpath: Path, key: str, image: np.ndarray) -> bool:
 
 
 def parse_size(text: str) -> tuple[int, int]:
-    """``"1280x720"`` -> (1280, 720)."""
+    """``"1280x720"`` -> (1280, 720); :class:`InputError` (a ValueError) naming the text otherwise."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX, ]\s*(\d+)\s*", text)
     if not m:
-        raise ValueError(f"expected a size like 1280x720, got {text!r}")
+        raise InputError(None, f"expected a size like 1280x720, got {text!r}")
     return int(m.group(1)), int(m.group(2))

@@ -86,7 +86,7 @@ def load_map(
         raise InputError(path, "map file not found")
     if suffix in IMAGE_SUFFIXES:
         image, channels = _read_image(path)
-    elif suffix == ".npy" and _is_plain_2d_npy(path):
+    elif suffix == ".npy" and is_map_npy(path):
         image, channels = _read_npy_map(path), 1
     else:
         from .events import accumulate_events_cached
@@ -126,7 +126,8 @@ def _read_image(path: Path) -> tuple[np.ndarray, int]:
     return np.ascontiguousarray(img, dtype=np.float32), channels
 
 
-def _is_plain_2d_npy(path: Path) -> bool:
+def is_map_npy(path: Path) -> bool:
+    """Whether a .npy holds a 2D map (plain, more than 8 columns) rather than an event table."""
     try:
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
