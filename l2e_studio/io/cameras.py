@@ -378,12 +378,16 @@ def _ros(path: Path, doc: dict) -> RigFile:
                    "ROS camera_info YAML")
 
 
+def _kalibr_cameras(doc: dict) -> list[str]:
+    return [k for k, v in doc.items() if isinstance(v, dict) and "intrinsics" in v]
+
+
 def _is_kalibr(doc: dict) -> bool:
-    return any(isinstance(v, dict) and "intrinsics" in v for v in doc.values())
+    return bool(_kalibr_cameras(doc))
 
 
 def _kalibr(path: Path, doc: dict, camera: str | None = None) -> RigFile:
-    names = [k for k, v in doc.items() if isinstance(v, dict) and "intrinsics" in v]
+    names = _kalibr_cameras(doc)
     name = camera or names[0]
     if name not in names:
         raise InputError(path, f"no camera {name!r} in the camchain; cameras are {', '.join(names)}")
@@ -402,13 +406,18 @@ def _kalibr(path: Path, doc: dict, camera: str | None = None) -> RigFile:
     return RigFile(K, D, model, _size(res[0]), _size(res[1]), seed, path, "Kalibr camchain YAML")
 
 
+def _opencalib_param(doc: dict) -> dict | None:
+    """The ``param`` section of an OpenCalib intrinsic json (``{name: {param: {cam_K ...}}}``)."""
+    return next((v["param"] for v in doc.values()
+                 if isinstance(v, dict) and isinstance(v.get("param"), dict) and "cam_K" in v["param"]), None)
+
+
 def _is_opencalib_intrinsic(doc: dict) -> bool:
-    return any(isinstance(v, dict) and isinstance(v.get("param"), dict) and "cam_K" in v["param"] for v in doc.values())
+    return _opencalib_param(doc) is not None
 
 
 def _opencalib_intrinsic(path: Path, doc: dict) -> RigFile:
-    param = next(v["param"] for v in doc.values()
-                 if isinstance(v, dict) and isinstance(v.get("param"), dict) and "cam_K" in v["param"])
+    param = _opencalib_param(doc)
     K = _check_K(path, _matrix(path, param["cam_K"], (3, 3), "cam_K"))
     D = _distortion(path, _vector(path, param.get("cam_dist"), "cam_dist"), "radtan")
     return RigFile(K, D, "radtan", _size(param.get("img_dist_w")), _size(param.get("img_dist_h")), None, path,
