@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -173,8 +173,7 @@ def make_scene(
     true_lidar = dirs_l * hits.t[:, None]  # spots are where the pulses really hit
     event_map = _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng)
 
-    keep = returned
-    return points[keep].astype(np.float32), intensity[keep].astype(np.float32), event_map
+    return points[returned].astype(np.float32), intensity[returned].astype(np.float32), event_map
 
 
 def _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng) -> np.ndarray:
@@ -309,14 +308,10 @@ def write_rig_files(out: Path, camera: CameraModel, seed: Extrinsic, truth: Extr
         "rotvec": truth.rotvec.tolist(),
         "rpy_deg": truth.rpy(degrees=True).tolist(),
         "seed_error": {"rotation_deg": err_deg, "translation_m": err_m},
-        "generator": {k: v for k, v in _config_dict(config).items()},
+        "generator": asdict(config),
     }
     header = "# Ground truth T_cam_lidar (X_cam = R X_lidar + t) of this synthetic dataset.\n"
     (out / "truth.yaml").write_text(header + yaml.safe_dump(truth_yaml, sort_keys=False, default_flow_style=None))
-
-
-def _config_dict(config: SynthConfig) -> dict:
-    return {k: getattr(config, k) for k in config.__dataclass_fields__}
 
 
 def read_truth(path: str | Path) -> Extrinsic:
