@@ -5,18 +5,15 @@ downloaded browser). Imported by ``tests/test_app_*.py``."""
 from __future__ import annotations
 
 import os
-import socket
 import time
 from pathlib import Path
 from typing import Callable
 
 import pytest
 
+from l2e_studio.app.screenshot import CHROMIUM_ARGS, free_port  # noqa: F401 (free_port: for the tests)
+
 CHROMIUM = Path(os.environ.get("L2E_CHROMIUM", "/usr/bin/chromium"))
-CHROMIUM_ARGS = [
-    "--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-]
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts" / "app"
 VIEWPORT = {"width": 1600, "height": 900}
 
@@ -29,12 +26,6 @@ def write_small_scenes(folder: Path, **changes) -> Path:
     from l2e_studio.synth import SynthConfig, write_dataset
 
     return write_dataset(folder, SynthConfig(**{**SMALL, **changes}))
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_for(condition: Callable[[], object], timeout: float = 20.0, interval: float = 0.02, what: str = "") -> object:

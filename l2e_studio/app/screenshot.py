@@ -21,7 +21,8 @@ CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-q
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -48,7 +49,7 @@ def take(out: Path, scenes: Path, chromium: str, width: int = 1600, height: int 
 
     scene_set = load_scene_folder(scenes)
     with tempfile.TemporaryDirectory(prefix="l2e_shot_") as tmp:
-        app = build_app(scene_set, port=_free_port(), out_dir=Path(tmp) / "results")
+        app = build_app(scene_set, port=free_port(), out_dir=Path(tmp) / "results")
         try:
             with sync_playwright() as pw:
                 browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
