@@ -263,7 +263,7 @@ class App:
     def notify_all(self, title: str, body: str, color: str | None = None) -> None:
         for client in self.server.get_clients().values():
             try:
-                client.add_notification(title, body, auto_close_seconds=12.0, color=color)
+                self.notify(client, title, body, color)
             except Exception:  # a tab closing right now
                 log.debug("notification to a closing client failed", exc_info=True)
 
