@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -21,6 +18,7 @@ import numpy as np
 import yaml
 
 from . import __version__
+from .atomic import atomic_write_bytes
 from .calibrate import CalibrationResult
 from .camera import CameraModel
 from .geometry import Extrinsic
@@ -113,46 +111,6 @@ def write_result(
     path = Path(path)
     data = dumps(result_to_dict(result, camera, scenes_dir, quality), path)
     return path, atomic_write_bytes(path, data, keep_existing=True)
-
-
-def atomic_write_bytes(path: str | Path, data: bytes, keep_existing: bool = True) -> Path | None:
-    """Write ``data`` to ``path`` so that readers see the old file or the new one, never a part.
-
-    With ``keep_existing`` an existing file is moved aside to ``<stem>.<timestamp>.bak<suffix>``
-    (returned); otherwise it is replaced.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    backup = None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if keep_existing and path.exists():
-            backup = backup_name(path)
-            try:
-                os.link(path, backup)  # the old content stays reachable under the backup name
-            except OSError:  # no hard links on this file system
-                shutil.copy2(path, backup)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return backup
-
-
-def backup_name(path: Path) -> Path:
-    """A free ``<stem>.<YYYYmmdd-HHMMSS>[-n].bak<suffix>`` next to ``path``."""
-    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    suffix = "".join(path.suffixes) or ""
-    stem = path.name[: len(path.name) - len(suffix)] if suffix else path.name
-    for i in range(1000):
-        candidate = path.with_name(f"{stem}.{stamp}{'-' + str(i) if i else ''}.bak{suffix}")
-        if not candidate.exists():
-            return candidate
-    raise FileExistsError(f"no free backup name for {path}")
 
 
 def _round(a) -> list:

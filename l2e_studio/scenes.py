@@ -16,12 +16,14 @@ modification time) so the second load of a large folder is fast.
 from __future__ import annotations
 
 import hashlib
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from .atomic import atomic_write_bytes
 from .camera import CameraModel
 from .errors import InputError
 from .geometry import Extrinsic
@@ -200,12 +202,12 @@ def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, 
 
 def _write_cache(cache_file: Path, arr: np.ndarray) -> None:
     """Best effort: a read-only scene folder simply goes uncached."""
+    buf = io.BytesIO()
+    np.save(buf, arr)
     try:
-        cache_file.parent.mkdir(exist_ok=True)
-        for old in cache_file.parent.glob(cache_file.name.rsplit(".", 2)[0] + ".*.npy"):
-            old.unlink(missing_ok=True)
-        tmp = cache_file.with_suffix(".tmp.npy")
-        np.save(tmp, arr)
-        tmp.replace(cache_file)
+        if cache_file.parent.is_dir():  # entries of earlier versions of the scan
+            for old in cache_file.parent.glob(cache_file.name.rsplit(".", 2)[0] + ".*.npy"):
+                old.unlink(missing_ok=True)
+        atomic_write_bytes(cache_file, buf.getvalue())
     except OSError:
         pass

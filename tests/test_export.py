@@ -9,7 +9,8 @@ import yaml
 
 from l2e_studio.calibrate import CalibrationResult, CalibrationSettings, Stage
 from l2e_studio.camera import CameraModel
-from l2e_studio.export import atomic_write_bytes, result_to_dict, write_result
+from l2e_studio.atomic import atomic_write_bytes
+from l2e_studio.export import result_to_dict, write_result
 from l2e_studio.geometry import Extrinsic
 from l2e_studio.io.cameras import load_seed
 
@@ -60,6 +61,15 @@ def test_an_existing_result_is_kept_as_a_backup(tmp_path):
     assert "T_cam_lidar" in path.read_text()
     _, backup2 = write_result(path, fake_result())
     assert backup2 != backup and backup.exists() and backup2.exists()
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    old = os.umask(0o022)
+    try:
+        path, _ = write_result(tmp_path / "r.yaml", fake_result())
+    finally:
+        os.umask(old)
+    assert (path.stat().st_mode & 0o777) == 0o644
 
 
 def test_a_failed_write_leaves_the_old_file_whole(tmp_path, monkeypatch):

@@ -16,7 +16,8 @@ import yaml
 from ..calibrate import CalibrationResult
 from ..camera import CameraModel
 from ..errors import InputError
-from ..export import atomic_write_bytes, extrinsic_to_dict, write_result
+from ..atomic import atomic_write_bytes
+from ..export import extrinsic_to_dict, write_result
 from ..geometry import Extrinsic
 from ..io.cameras import load_seed
 from .overlay import encode_png

@@ -23,6 +23,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..errors import InputError
 
 EVENT_MSG = """std_msgs/Header header
@@ -299,9 +300,7 @@ def write_lidar_pcd(path: str | Path, points: np.ndarray, intensity: np.ndarray)
     header = (f"# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\n"
               f"TYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(header.encode("ascii") + rec.tobytes())
-    tmp.replace(path)
+    atomic_write_bytes(path, header.encode("ascii") + rec.tobytes())
     return path
 
 

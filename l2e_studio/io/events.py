@@ -25,6 +25,7 @@ span of the recording is under 10^4 (i.e. < 2.8 h in seconds), microseconds othe
 from __future__ import annotations
 
 import hashlib
+import io
 import os
 import re
 from dataclasses import dataclass
@@ -33,6 +34,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import event_prophesee as prophesee
 
@@ -292,18 +294,12 @@ def _read_cache(cpath: Path, key: str) -> np.ndarray | None:
 
 
 def _write_cache(cpath: Path, key: str, image: np.ndarray) -> bool:
-    tmp = cpath.with_name(cpath.name + f".{os.getpid()}.tmp")
+    buf = io.BytesIO()
+    np.savez_compressed(buf, key=np.array(key), map=image.astype(np.float32))
     try:
-        cpath.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, key=np.array(key), map=image.astype(np.float32))
-        tmp.replace(cpath)
+        atomic_write_bytes(cpath, buf.getvalue())
         return True
     except OSError:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
         return False
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..errors import InputError
 
 #: Image suffixes read as maps. Raw event suffixes (``EVENT_SUFFIXES``) are accepted as well.
@@ -155,12 +156,9 @@ def _check_size(path: Path, image: np.ndarray, width: int | None, height: int | 
 def write_map_png(path: str | Path, event_map: np.ndarray) -> Path:
     """Write an accumulated event map as an 8-bit PNG (values clipped to [0, 255])."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     img = np.clip(np.rint(np.asarray(event_map, dtype=np.float64)), 0, 255).astype(np.uint8)
     ok, buf = cv2.imencode(".png", img)
     if not ok:
         raise OSError(f"cannot encode {path} as PNG")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(buf.tobytes())
-    tmp.replace(path)
+    atomic_write_bytes(path, buf.tobytes())
     return path
