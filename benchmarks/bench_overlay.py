@@ -25,9 +25,9 @@ from l2e_studio.app.overlay import (
     project_scene,
     render_overlay,
 )
-from l2e_studio.app.pose import BODY_TO_OPTICAL, extrinsic_from_sliders
+from l2e_studio.app.pose import extrinsic_from_sliders
 from l2e_studio.camera import CameraModel
-from l2e_studio.geometry import Extrinsic
+from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 from l2e_studio.scenes import Scene, SceneSet
 
 
@@ -70,7 +70,7 @@ def main() -> None:
 
     camera, pts, intensity = full_size_scene(args.points, args.width, args.height)
     T = np.eye(4)
-    T[:3, :3] = BODY_TO_OPTICAL  # lidar x forward, y left, z up -> optical camera frame
+    T[:3, :3] = LIDAR_TO_CAMERA_AXES  # lidar x forward, y left, z up -> optical camera frame
     T[:3, 3] = (0.05, -0.1, 0.02)
     seed = Extrinsic.from_matrix(T)
     event_map = event_map_for(pts, seed, camera)

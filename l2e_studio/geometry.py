@@ -15,6 +15,10 @@ from scipy.spatial.transform import Rotation
 
 from .camera import CameraModel
 
+#: Rotation from a lidar/vehicle frame (x forward, y left, z up) to a camera's optical frame
+#: (x right, y down, z forward): the rotation part of an ideally mounted, forward-looking rig.
+LIDAR_TO_CAMERA_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+
 
 @dataclass(frozen=True)
 class Extrinsic:

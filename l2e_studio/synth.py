@@ -33,12 +33,9 @@ from scipy.spatial.transform import Rotation
 
 from .camera import CameraModel
 from .errors import InputError
-from .geometry import Extrinsic, in_image, project_points
+from .geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
 from .synth_layout import make_layout
 from .synth_world import cast, surface
-
-#: Lidar frame (x forward, y left, z up) to camera frame (x right, y down, z forward).
-AXIS_SWAP = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 
 @dataclass(frozen=True)
@@ -97,7 +94,7 @@ def make_rig(config: SynthConfig) -> tuple[CameraModel, Extrinsic, Extrinsic]:
     camera = CameraModel(K, w, h, D)
 
     mount = Rotation.from_euler("xyz", rng.uniform(-3, 3, 3), degrees=True).as_matrix()
-    R = AXIS_SWAP @ mount  # camera axes from lidar axes, then a small mounting error
+    R = LIDAR_TO_CAMERA_AXES @ mount  # camera axes from lidar axes, then a small mounting error
     offset = rng.normal(size=3)
     offset *= rng.uniform(*config.camera_offset_m) / np.linalg.norm(offset)  # camera centre in the lidar frame
     truth = Extrinsic(Rotation.from_matrix(R).as_rotvec(), -R @ offset)

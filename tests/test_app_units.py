@@ -27,7 +27,8 @@ from l2e_studio.app.overlay import (
     project_scene,
     render_overlay,
 )
-from l2e_studio.app.pose import BODY_TO_OPTICAL, extrinsic_from_sliders, sliders_from_extrinsic
+from l2e_studio.app.pose import extrinsic_from_sliders, sliders_from_extrinsic
+from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES
 from l2e_studio.app.state import SessionState
 from l2e_studio.app.workers import LatestWorker
 from l2e_studio.camera import CameraModel
@@ -38,7 +39,7 @@ from l2e_studio.io.cameras import load_seed
 
 def lidar_to_optical(t=(0.05, -0.1, 0.02)) -> Extrinsic:
     T = np.eye(4)
-    T[:3, :3] = BODY_TO_OPTICAL
+    T[:3, :3] = LIDAR_TO_CAMERA_AXES
     T[:3, 3] = t
     return Extrinsic.from_matrix(T)
 

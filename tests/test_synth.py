@@ -12,10 +12,9 @@ import yaml
 
 from l2e_studio.cli import main as cli_main
 from l2e_studio.errors import InputError
-from l2e_studio.geometry import Extrinsic, in_image, project_points
+from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
 from l2e_studio.scenes import load_scene_folder
 from l2e_studio.synth import (
-    AXIS_SWAP,
     SAMPLE_CONFIG,
     SynthConfig,
     lidar_directions,
@@ -92,7 +91,7 @@ def test_rig_is_a_plausible_camera_beside_the_lidar():
     assert camera.is_distorted
     assert not make_rig(SynthConfig(distortion=False))[0].is_distorted
     # a few degrees of mounting error around the axis swap, camera 5-15 cm from the lidar
-    off_deg, _ = truth.error_to(Extrinsic.from_matrix(np.block([[AXIS_SWAP, np.zeros((3, 1))], [0, 0, 0, 1]])))
+    off_deg, _ = truth.error_to(Extrinsic.from_matrix(np.block([[LIDAR_TO_CAMERA_AXES, np.zeros((3, 1))], [0, 0, 0, 1]])))
     assert 0.1 < off_deg < 6.0
     assert 0.05 <= np.linalg.norm(truth.inverse().translation) <= 0.15
     deg, m = seed.error_to(truth)

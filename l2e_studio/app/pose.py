@@ -14,10 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..geometry import Extrinsic
-
-#: Columns are the body axes (forward, left, up) written in optical-frame coordinates.
-BODY_TO_OPTICAL = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 
 SLIDER_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
 
@@ -26,7 +23,7 @@ def extrinsic_from_sliders(values: np.ndarray, reference: Extrinsic) -> Extrinsi
     """Slider values (x, y, z [m], roll, pitch, yaw [deg]) -> ``T_cam_lidar``."""
     v = np.asarray(values, dtype=np.float64).reshape(6)
     delta_body = Rotation.from_euler("xyz", v[3:], degrees=True).as_rotvec()
-    delta_optical = BODY_TO_OPTICAL @ delta_body
+    delta_optical = LIDAR_TO_CAMERA_AXES @ delta_body
     rotated = reference.perturbed(np.zeros(3), delta_optical)
     return Extrinsic(rotated.rotvec, v[:3])
 
@@ -40,7 +37,7 @@ def sliders_from_extrinsic(
     triple closest to it is returned so the sliders do not jump by 360 deg.
     """
     _, d_optical = reference.delta_to(extrinsic)
-    d_body = BODY_TO_OPTICAL.T @ d_optical
+    d_body = LIDAR_TO_CAMERA_AXES.T @ d_optical
     rot = Rotation.from_rotvec(d_body)
     a = rot.as_euler("xyz", degrees=True)
     if near is not None:
