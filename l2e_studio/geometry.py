@@ -202,7 +202,8 @@ def project_with_jacobian(
     X, Y, Z = P[:, 0], P[:, 1], P[:, 2]
     in_front = Z > 1e-6
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv_z = np.where(in_front, 1.0 / Z, np.nan).astype(P.dtype, copy=False)
+        inv_z = np.reciprocal(Z, dtype=P.dtype)
+    inv_z[~in_front] = np.nan
     x = X * inv_z
     y = Y * inv_z
     xd, yd, Jd = distort(x, y, camera, jacobian)
@@ -210,8 +211,12 @@ def project_with_jacobian(
     fx, fy, s, cx, cy = K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]
     uv = np.empty((P.shape[0], 2), dtype=P.dtype)
     with np.errstate(over="ignore", invalid="ignore"):
-        uv[:, 0] = fx * xd + s * yd + cx
-        uv[:, 1] = fy * yd + cy
+        np.multiply(xd, fx, out=uv[:, 0])
+        if s != 0:
+            uv[:, 0] += s * yd
+        uv[:, 0] += cx
+        np.multiply(yd, fy, out=uv[:, 1])
+        uv[:, 1] += cy
     if not jacobian:
         return uv, in_front, None
     # d(xd, yd)/d(x, y) from Jd, then d(x, y)/d(X, Y, Z) = [[1/Z, 0, -x/Z], [0, 1/Z, -y/Z]].
@@ -234,14 +239,23 @@ def _distort_radtan(x, y, D, jacobian):
     d = np.zeros(8, dtype=D.dtype)
     d[: D.size] = D
     k1, k2, p1, p2, k3, k4, k5, k6 = d
-    r2 = x * x + y * y
-    a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    r2 = x * x
+    r2 += y * y
+    a = r2 * k3  # a = 1 + k1 r2 + k2 r2^2 + k3 r2^3, evaluated in place (hot path)
+    a += k2
+    a *= r2
+    a += k1
+    a *= r2
+    a += 1
     rational = bool(k4 or k5 or k6)
     b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6)) if rational else 1.0
-    radial = a / b
+    radial = a / b if rational else a
     xy = x * y
-    xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * xy
+    xd = x * radial
+    yd = y * radial
+    if p1 or p2:
+        xd += 2 * p1 * xy + p2 * (r2 + 2 * x * x)
+        yd += p1 * (r2 + 2 * y * y) + 2 * p2 * xy
     if not jacobian:
         return xd, yd, None
     da = k1 + r2 * (2 * k2 + r2 * 3 * k3)
