@@ -160,9 +160,8 @@ class SceneStack:
     # --- projection and the paper's MI -------------------------------------------------------
     def project(self, extrinsic: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates (N, 2) of every point and the mask of those inside the image."""
-        pc = _transform(self.points, extrinsic.R, extrinsic.translation)
-        uv, front = project_points(pc.T, self.camera)
-        return uv, front & (pc[2] > MIN_DEPTH) & in_image(uv, self.camera)
+        return _project_inside(self.points, extrinsic.R.astype(np.float32),
+                               extrinsic.translation.astype(np.float32), self.camera)
 
     def joint_histograms(self, extrinsic: Extrinsic, per_scene: bool = True) -> np.ndarray:
         """(S, 256, 256) joint (L, E) counts per scene, nearest-pixel lookup, in-image points;
@@ -179,10 +178,7 @@ class SceneStack:
     def _joint_index_chunk(self, R, t, a, b, out, per_scene: bool) -> None:
         """Flat ([scene,] L, E) histogram index of points a..b; off-image points get the spill bin."""
         S, Hp, Wp = self.maps.shape
-        pc = R @ self.points[:, a:b]
-        pc += t[:, None]
-        uv, front = project_points(pc.T, self.camera)
-        inside = front & (pc[2] > MIN_DEPTH) & in_image(uv, self.camera)
+        uv, inside = _project_inside(self.points[:, a:b], R, t, self.camera)
         ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int32) + 1
         vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int32) + 1
         scene = self.scene_of[a:b]
@@ -426,9 +422,12 @@ def single_threaded_blas():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _transform(points: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(3, N) lidar points into the camera frame, float32."""
-    return R.astype(np.float32) @ points + t.astype(np.float32)[:, None]
+def _project_inside(points: np.ndarray, R: np.ndarray, t: np.ndarray, camera: CameraModel):
+    """Pixel coordinates (N, 2) of (3, N) lidar points, and the mask of those in the image."""
+    pc = R @ points
+    pc += t[:, None]
+    uv, front = project_points(pc.T, camera)
+    return uv, front & (pc[2] > MIN_DEPTH) & in_image(uv, camera)
 
 
 def _stack_maps(
