@@ -37,7 +37,7 @@ def main() -> None:
         for name, ext in (("seed", ss.seed), ("result", res.extrinsic)):
             deg, m = ext.error_to(truth)
             print(f"{name}: {deg:.3f} deg, {m * 1000:.1f} mm from the truth")
-        print(f"MI {res.mi_seed:.4f} -> {res.mi_result:.4f} in {res.seconds:.1f} s ({res.evaluations} evaluations)")
+        print(f"MI {res.score_seed:.4f} -> {res.score_result:.4f} in {res.seconds:.1f} s ({res.evaluations} evaluations)")
 
 
 if __name__ == "__main__":

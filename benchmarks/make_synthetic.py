@@ -96,10 +96,10 @@ def objective_peak(stack: SceneStack, camera, truth) -> None:
     from scipy.optimize import minimize
 
     from l2e_studio.geometry import in_image
-    from l2e_studio.objective import SmoothObjective
+    from l2e_studio.objective import MIObjective
 
     uv, inside = stack.project(truth)
-    obj = SmoothObjective(stack.select(inside & in_image(uv, camera, 15)), truth, truth)
+    obj = MIObjective(stack.select(inside & in_image(uv, camera, 15)), truth, truth)
     scale = np.array([0.01] * 3 + [np.radians(0.2)] * 3)
 
     def f(z):

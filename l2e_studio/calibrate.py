@@ -32,13 +32,17 @@ from scipy.optimize import minimize
 
 from .camera import CameraModel
 from .geometry import Extrinsic
-from .objective import SceneStack, SmoothObjective, single_threaded_blas
+from .objective import MapObjective, SceneStack, single_threaded_blas
 from .scenes import Scene
+from .scoring import OBJECTIVES, objective_for
 
 METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
 GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
 #: SLSQP stopping tolerance on the MI (nats): loose for the coarse stages, tight for the last
 FTOL_COARSE, FTOL_FINAL = 1e-5, 1e-7
+#: The global stage: rotation corrections on a grid of this step (deg) and half-width (steps)
+#: per axis, scored on at most this many points at the coarsest smoothing.
+GRID_STEP_DEG, GRID_HALF_STEPS, GRID_POINTS, GRID_STARTS = 2.5, 2, 30_000, 2
 
 
 @dataclass(frozen=True)
@@ -64,27 +68,32 @@ class CalibrationSettings:
     rotation_only: bool = False
     max_iterations: int = 100  # per stage
     stages: tuple[Stage, ...] | None = None  # overrides the schedule derived from sigma
+    objective: str = "auto"  # "mi", "edges", or "auto": chosen from the map kinds (scoring.objective_for)
+    global_search: bool | None = None  # multi-start from a rotation grid; None: for the edges objective
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"unknown optimiser {self.method!r}; expected one of {', '.join(METHODS)}")
+        if self.objective != "auto" and self.objective not in OBJECTIVES:
+            raise ValueError(f"unknown objective {self.objective!r}; expected auto or one of {', '.join(OBJECTIVES)}")
         if self.translation_bound < 0 or self.rotation_bound_deg <= 0:
             raise ValueError("bounds must be positive")
         if self.sigma < 0:
             raise ValueError("sigma must be >= 0")
 
-    def schedule(self, image_width: int = 1280) -> tuple[Stage, ...]:
-        """The stages for maps ``image_width`` pixels wide.
+    def schedule(self, image_width: int = 1280, image_height: int | None = None) -> tuple[Stage, ...]:
+        """The stages for maps ``image_width`` x ``image_height`` pixels.
 
-        Coarse smoothing is set for the paper's 1280-pixel sensor and scaled with the width, so
-        that a stage sees the same angular blur whatever the camera; coarse maps are downsampled
-        no further than 320 pixels wide.
+        Coarse smoothing is set for the paper's 1280x720 sensor and scaled with the image's
+        smaller relative side, so that a stage sees the same angular blur whatever the camera
+        and a letterbox image (KITTI's 1242x375) is not blurred to a few rows; coarse maps are
+        downsampled no further than 320 pixels wide.
         """
         if self.stages:
             return self.stages
         if not self.coarse_to_fine:
             return (Stage(self.sigma),)
-        w = image_width / 1280.0
+        w = min(image_width / 1280.0, (image_height or 720) / 720.0)
         return (
             Stage(max(20.0 * w, self.sigma), 150_000, min(1.0, max(0.25, 320.0 / image_width))),
             Stage(max(8.0 * w, self.sigma), 400_000, min(1.0, max(0.5, 640.0 / image_width))),
@@ -112,16 +121,17 @@ class CalibrationResult:
     seed: Extrinsic
     settings: CalibrationSettings
     scene_names: list[str]
-    mi_seed: float
-    mi_result: float
-    mi_seed_per_scene: np.ndarray
-    mi_result_per_scene: np.ndarray
+    score_seed: float
+    score_result: float
+    score_seed_per_scene: np.ndarray
+    score_result_per_scene: np.ndarray
     evaluations: int
     seconds: float  # optimisation wall time
     cancelled: bool = False
     history: list[tuple[int, float, int]] = field(default_factory=list)  # (evaluation, MI, stage)
     message: str = ""
     stages: tuple[Stage, ...] = ()  # the schedule that ran
+    objective: str = "mi"  # the score climbed and reported in ``score_*``
 
 
 class _Cancelled(Exception):
@@ -148,9 +158,13 @@ def calibrate(
 def stack_scenes(
     scenes: Sequence[Scene], camera: CameraModel, seed: Extrinsic, settings: CalibrationSettings = CalibrationSettings()
 ) -> SceneStack:
-    """The scenes stacked for :func:`calibrate`: points that cannot reach the image from
-    anywhere within twice the bounds around ``seed`` are left out."""
-    return SceneStack.build(scenes, camera, settings.sigma, seed, 2 * settings.translation_bound, 2 * settings.rotation_bound_deg)
+    """The scenes stacked for :func:`calibrate` and its objective (``settings.objective``, or
+    the one the map kinds call for): points that cannot reach the image from anywhere within
+    twice the bounds around ``seed`` are left out."""
+    objective = objective_for([sc.map_kind for sc in scenes], settings.objective)
+    return SceneStack.build(
+        scenes, camera, settings.sigma, seed, 2 * settings.translation_bound, 2 * settings.rotation_bound_deg, objective
+    )
 
 
 def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> CalibrationResult:
@@ -162,62 +176,115 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
     else:
         stack = stack_scenes(scenes, camera, seed, settings)
     final = stack.with_sigma(settings.sigma)
-    stages = settings.schedule(stack.camera.width)
+    stages = settings.schedule(stack.camera.width, stack.camera.height)
     scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
     free = np.array([not settings.rotation_only] * 3 + [True] * 3)
     if settings.translation_bound == 0:
         free[:3] = False
 
     # the seed's score first: a cancelled run then only has its result left to score
-    mi_seed, per_seed = final.mi(seed)
-    history: list[tuple[int, float, int]] = []
-    count = 0
+    score_seed, per_seed = final.score(seed)
+    run = _Run(stack, seed, settings, scale, free, len(stages), on_progress, cancel, t0)
     current = seed
-    cancelled = False
-    message = ""
-    for k, stage in enumerate(stages):
-        if cancel is not None and cancel.is_set():
-            cancelled, message = True, "cancelled"
-            break
-        obj = stack.with_sigma(stage.sigma, stage.scale).objective(seed, start=current, max_points=stage.max_points)
-        tracker = _Tracker(obj, scale, free, k, len(stages), on_progress, cancel, t0, count, history)
-        try:
-            res = _run_stage(obj, tracker, settings, final=k == len(stages) - 1)
-            message = str(res.message)
-            x = tracker.full(res.x)
-            if -res.fun < tracker.best_mi:  # keep the best point seen, whatever the optimiser says
-                x = tracker.best_delta
-        except _Cancelled:
-            cancelled = True
-            x = tracker.best_delta
-            message = "cancelled"
-        count = tracker.count
-        current = obj.extrinsic(x)
-        if cancelled:
-            break
+    if _global_search(settings, stack) and len(stages) > 1:
+        # several starts climb the coarse stages; the fine score picks which one finishes
+        starts = [seed] + _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
+        ends = []
+        for start in starts:
+            ends.append(run.climb(start, stages[:-1]))
+            if run.cancelled:
+                break
+        current = max(ends, key=lambda e: final.score(e, per_scene=False)[0])
+        if not run.cancelled:
+            current = run.climb(current, stages[-1:], first=len(stages) - 1)
+    else:
+        current = run.climb(seed, stages)
+    cancelled, message, count, history = run.cancelled, run.message, run.count, run.history
 
-    mi_res, per_res = (mi_seed, per_seed) if current is seed else final.mi(current)
-    if mi_res < mi_seed and not cancelled:
-        # The smooth objective climbed somewhere the paper's MI scores below the seed (seen on
-        # street scenes of frame cameras, where the landscape misleads): never hand back worse.
-        current, mi_res, per_res = seed, mi_seed, per_seed
+    score_res, per_res = (score_seed, per_seed) if current is seed else final.score(current)
+    if score_res < score_seed and not cancelled:
+        # The smooth objective climbed somewhere its reporting form scores below the seed:
+        # never hand back worse by the objective's own measure.
+        current, score_res, per_res = seed, score_seed, per_seed
         message = "no extrinsic within the bounds scored above the seed; the seed is kept"
     return CalibrationResult(
         extrinsic=current,
         seed=seed,
         settings=settings,
         scene_names=list(stack.names),
-        mi_seed=mi_seed,
-        mi_result=mi_res,
-        mi_seed_per_scene=per_seed,
-        mi_result_per_scene=per_res,
+        score_seed=score_seed,
+        score_result=score_res,
+        score_seed_per_scene=per_seed,
+        score_result_per_scene=per_res,
         evaluations=count,
         seconds=time.perf_counter() - t0,
         cancelled=cancelled,
         history=history,
         message=message,
         stages=stages,
+        objective=stack.objective_name,
     )
+
+
+def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
+    """Whether to run the multi-start global stage: on request, else (``None``) for the edge
+    objective, whose coarse landscape can hold side peaks; the MI of event maps is smooth
+    enough to reach seeds 0.1 rad per axis off from one start."""
+    if settings.global_search is not None:
+        return settings.global_search
+    return stack.objective_name == "edges"
+
+
+def _grid_starts(coarse: SceneStack, seed: Extrinsic, free: np.ndarray, count: int = GRID_STARTS) -> list[Extrinsic]:
+    """The ``count`` best rotation corrections of the seed on a grid (the seed itself left
+    out), scored by the coarsest objective on a thinned point set."""
+    if not free[3:].all():
+        return []
+    obj = coarse.objective(seed, max_points=GRID_POINTS)
+    steps = np.radians(GRID_STEP_DEG) * np.arange(-GRID_HALF_STEPS, GRID_HALF_STEPS + 1)
+    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    grid = grid[np.abs(grid).sum(axis=1) > 0]
+    values = np.array([obj.value(np.concatenate([np.zeros(3), dw])) for dw in grid])
+    return [obj.extrinsic(np.concatenate([np.zeros(3), grid[i]])) for i in np.argsort(values)[::-1][:count]]
+
+
+class _Run:
+    """One calibration's climbs: evaluation count, history, progress and cancel across stages
+    and starts."""
+
+    def __init__(self, stack, seed, settings, scale, free, n_stages, on_progress, cancel, t0) -> None:
+        self.stack, self.seed, self.settings = stack, seed, settings
+        self.scale, self.free, self.n_stages = scale, free, n_stages
+        self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
+        self.count = 0
+        self.history: list[tuple[int, float, int]] = []
+        self.cancelled = False
+        self.message = ""
+
+    def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0) -> Extrinsic:
+        """Climb ``stages`` (numbered from ``first``) from ``start``; the best point reached."""
+        current = start
+        for k, stage in enumerate(stages, start=first):
+            if self.cancel is not None and self.cancel.is_set():
+                self.cancelled, self.message = True, "cancelled"
+                break
+            obj = self.stack.with_sigma(stage.sigma, stage.scale).objective(self.seed, start=current, max_points=stage.max_points)
+            tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
+                               self.count, self.history)
+            try:
+                res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
+                self.message = str(res.message)
+                x = tracker.full(res.x)
+                if -res.fun < tracker.best_mi:  # keep the best point seen, whatever the optimiser says
+                    x = tracker.best_delta
+            except _Cancelled:
+                self.cancelled, self.message = True, "cancelled"
+                x = tracker.best_delta
+            self.count = tracker.count
+            current = obj.extrinsic(x)
+            if self.cancelled:
+                break
+        return current
 
 
 class _Tracker:
@@ -226,7 +293,7 @@ class _Tracker:
     #: A stage typically takes this many evaluations; progress approaches the stage's end by it.
     TYPICAL_EVALUATIONS = 25.0
 
-    def __init__(self, obj: SmoothObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history):
+    def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history):
         self.obj, self.scale, self.free = obj, scale, free
         self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
@@ -283,7 +350,7 @@ class _Tracker:
         return -mi, -(g * self.scale)[self.free]
 
 
-def _run_stage(obj: SmoothObjective, tr: _Tracker, settings: CalibrationSettings, final: bool = True):
+def _run_stage(obj: MapObjective, tr: _Tracker, settings: CalibrationSettings, final: bool = True):
     n = int(tr.free.sum())
     bounds = [(-1.0, 1.0)] * n
     z0 = np.clip(tr.z0(), -1.0, 1.0)

@@ -22,6 +22,7 @@ from .atomic import atomic_write_bytes
 from .calibrate import CalibrationResult
 from .camera import CameraModel
 from .geometry import Extrinsic
+from .verdict import Verdict
 
 
 def extrinsic_to_dict(ext: Extrinsic) -> dict:
@@ -41,9 +42,14 @@ def result_to_dict(
     camera: CameraModel | None = None,
     scenes_dir: str | Path | None = None,
     quality: dict | None = None,
+    verdict: Verdict | None = None,
 ) -> dict:
-    """The result file's content as plain Python types (``quality``: an assessment, if run)."""
-    ext = result.extrinsic
+    """The result file's content as plain Python types (``quality``: an assessment, if run).
+
+    With a ``verdict``, the calibration written at the top is the one the verdict hands back
+    (the seed, when the result was not trusted); the optimiser's own answer stays on record
+    under ``optimiser_result``."""
+    ext = result.extrinsic if verdict is None else verdict.extrinsic
     s = result.settings
     out = {
         "l2e_studio_version": __version__,
@@ -65,18 +71,22 @@ def result_to_dict(
             "message": result.message,
             "cancelled": result.cancelled,
         },
-        "mi": {
-            "seed": float(result.mi_seed),
-            "result": float(result.mi_result),
+        "score": {
+            "objective": result.objective,
+            "seed": float(result.score_seed),
+            "result": float(result.score_result),
             "per_scene": [
                 {"scene": n, "seed": _f(a), "result": _f(b)}
-                for n, a, b in zip(result.scene_names, result.mi_seed_per_scene, result.mi_result_per_scene)
+                for n, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene)
             ],
         },
         "evaluations": int(result.evaluations),
         "optimisation_seconds": round(float(result.seconds), 4),
         "scenes": list(result.scene_names),
     }
+    if verdict is not None:
+        out["verdict"] = verdict.to_dict()
+        out["optimiser_result"] = extrinsic_to_dict(result.extrinsic)
     if scenes_dir is not None:
         out["scenes_dir"] = str(scenes_dir)
     if quality is not None:
@@ -105,11 +115,12 @@ def write_result(
     camera: CameraModel | None = None,
     scenes_dir: str | Path | None = None,
     quality: dict | None = None,
+    verdict: Verdict | None = None,
 ) -> tuple[Path, Path | None]:
     """Write the result file atomically. Returns ``(path, backup)``: an existing file at
     ``path`` is first kept under a timestamped backup name, never overwritten."""
     path = Path(path)
-    data = dumps(result_to_dict(result, camera, scenes_dir, quality), path)
+    data = dumps(result_to_dict(result, camera, scenes_dir, quality, verdict), path)
     return path, atomic_write_bytes(path, data, keep_existing=True)
 
 

@@ -28,7 +28,10 @@ from threadpoolctl import threadpool_limits
 
 from .camera import CameraModel
 from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
-from .mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
+from .scoring import OBJECTIVES
+from .scoring import edges as edge_score
+from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
+from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
 
 #: Maps of accumulated events are clipped here (the paper); camera images keep their 0..255.
@@ -59,6 +62,8 @@ class SceneStack:
     sigma: float  # map smoothing in full-resolution pixels
     scale: float = 1.0  # maps (and ``camera``) are the full-resolution ones resized by this
     full_camera: CameraModel | None = None
+    objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
+    weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -70,12 +75,17 @@ class SceneStack:
         reference: Extrinsic | None = None,
         reach_m: float = 0.5,
         reach_deg: float = 20.0,
+        objective: str = "mi",
     ) -> "SceneStack":
-        """Stack ``scenes``; with a ``reference`` extrinsic, drop points that cannot reach the
-        image for any extrinsic within ``reach_m`` / ``reach_deg`` of it (an over-estimate)."""
+        """Stack ``scenes`` for ``objective`` (``mi`` or ``edges``); with a ``reference``
+        extrinsic, drop points that cannot reach the image for any extrinsic within
+        ``reach_m`` / ``reach_deg`` of it (an over-estimate). For ``edges`` only the points on
+        lidar edges are kept, with their weights."""
         if not scenes:
             raise ValueError("no scenes to stack")
-        pts, bins, owner = [], [], []
+        if objective not in OBJECTIVES:
+            raise ValueError(f"unknown objective {objective!r}; expected one of {', '.join(OBJECTIVES)}")
+        pts, bins, owner, weights = [], [], [], []
         for i, sc in enumerate(scenes):
             if sc.event_map.shape != (camera.height, camera.width):
                 raise ValueError(
@@ -83,7 +93,13 @@ class SceneStack:
                     f"camera expects {camera.width}x{camera.height}"
                 )
             p = np.asarray(sc.points, dtype=np.float32)
-            keep = _reachable(p, camera, reference, reach_m, reach_deg) if reference is not None else slice(None)
+            keep = np.ones(len(p), dtype=bool)
+            if reference is not None:
+                keep &= _reachable(p, camera, reference, reach_m, reach_deg)
+            if objective == "edges":
+                w = lidar_edge_weights(p, sc.intensity)
+                keep &= w >= MIN_WEIGHT
+                weights.append(w[keep])
             pts.append(p[keep])
             bins.append(np.clip(np.rint(sc.intensity[keep]), 0, N_BINS - 1).astype(np.int32))
             owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
@@ -95,11 +111,13 @@ class SceneStack:
             points=np.ascontiguousarray(np.concatenate(pts).T),
             l_bins=np.concatenate(bins),
             scene_of=np.concatenate(owner),
-            maps=_stack_maps(raw, kinds, sigma),
+            maps=_stack_maps(raw, kinds, sigma, objective=objective),
             map_kinds=kinds,
             raw_maps=raw,
             sigma=float(sigma),
             full_camera=camera,
+            objective_name=objective,
+            weights=np.concatenate(weights) if objective == "edges" else None,
         )
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
@@ -109,7 +127,7 @@ class SceneStack:
             return self
         full = self.full_camera or self.camera
         camera = full if scale == 1.0 else full.scaled(scale)
-        maps = _stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height))
+        maps = _stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name)
         return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
 
     def select(self, mask: np.ndarray) -> "SceneStack":
@@ -120,6 +138,7 @@ class SceneStack:
             points=np.ascontiguousarray(self.points[:, mask]),
             l_bins=self.l_bins[mask],
             scene_of=self.scene_of[mask],
+            weights=None if self.weights is None else self.weights[mask],
         )
 
     def subset(self, scenes: Sequence[int] | np.ndarray) -> "SceneStack":
@@ -135,6 +154,7 @@ class SceneStack:
             points=np.ascontiguousarray(self.points[:, keep]),
             l_bins=self.l_bins[keep],
             scene_of=renumber[self.scene_of[keep]],
+            weights=None if self.weights is None else self.weights[keep],
             maps=self.maps[idx],
             map_kinds=tuple(self.map_kinds[i] for i in idx),
             raw_maps=tuple(self.raw_maps[i] for i in idx),
@@ -210,24 +230,53 @@ class SceneStack:
                 return total, np.full(self.n_scenes, np.nan)
             return total, np.array([mi_from_joint_histogram(j) for j in joints])
 
+    # --- the stack's own score (what the optimiser climbs, in its reporting form) -------------
+    def edge_scores(
+        self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray]:
+        """The edge score at ``extrinsic`` (nearest-pixel lookup; a point off the image reads
+        "no edge"): (the scenes pooled, per scene), as :meth:`mi` returns them."""
+        if self.weights is None:
+            raise ValueError("this stack was not built for the edges objective")
+        uv, inside = self.project(extrinsic)
+        S, Hp, Wp = self.maps.shape
+        ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int64) + 1
+        vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int64) + 1
+        e = self.maps.reshape(-1)[(self.scene_of * Hp + vi) * Wp + ui].astype(np.float64)
+        contrib = self.weights * (e - edge_score.OFFSET) / edge_score.SCALE
+        num = np.bincount(self.scene_of, weights=contrib, minlength=S)
+        den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
+        mask = np.ones(S, dtype=bool) if pooled is None else np.asarray(pooled, dtype=bool)
+        total = float(num[mask].sum() / den[mask].sum()) if mask.any() and den[mask].sum() > 0 else float("nan")
+        per = np.where(den > 0, num / np.maximum(den, 1e-12), np.nan) if per_scene else np.full(S, np.nan)
+        return total, per
+
+    def score(
+        self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray]:
+        """The score of the stack's objective at ``extrinsic`` (the paper's MI, or the edge
+        score): (the scenes pooled, per scene)."""
+        if self.objective_name == "edges":
+            return self.edge_scores(extrinsic, per_scene, pooled)
+        return self.mi(extrinsic, per_scene, pooled)
+
     # --- the optimiser's objective -------------------------------------------------------
     def objective(
         self, base: Extrinsic, start: Extrinsic | None = None, max_points: int | None = None
-    ) -> "SmoothObjective":
-        """The differentiable MI as a function of a correction of ``base``, over the points
+    ) -> "MapObjective":
+        """The differentiable score as a function of a correction of ``base``, over the points
         that land in the image at ``start`` (default: ``base``), thinned to ``max_points``."""
         start = base if start is None else start
         _, inside = self.project(start)
-        return SmoothObjective(self.select(inside).thinned(max_points), base, start)
+        cls = EdgeObjective if self.objective_name == "edges" else MIObjective
+        return cls(self.select(inside).thinned(max_points), base, start)
 
 
-class SmoothObjective:
-    """Differentiable MI of a fixed point set as a function of a local correction ``delta``.
+class MapObjective:
+    """A smooth score of a fixed point set as a function of a local correction ``delta`` of
+    ``base``: the bilinear map lookup and its Jacobian, shared by the concrete scores.
 
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
-    The Silverman widths are fixed when the objective is made (at ``start``) so that the
-    value and the gradient describe one and the same smooth function.
-
     Points are processed in cache-sized chunks. The four map values around each projected
     point come from a single gather: the map is packed as four 16-bit fixed-point neighbours
     (1/256 of a count) per pixel.
@@ -245,36 +294,17 @@ class SmoothObjective:
         self._qh = Hp - 1
         self._quads = _pack_quads(stack.maps)
         self._scene_base = (stack.scene_of * (self._qh * self._qw)).astype(np.int32)
-        self._l_offset = (stack.l_bins * N_BINS).astype(np.int32)
         self._K = stack.camera.K.astype(np.float32)
         self.n = float(stack.n_points)
-        hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
-        self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
-        joint = self._soft_histogram(self._sample(self.start, jacobian=False)[0])
-        self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
-        self._A_l = kernel_matrix(self.h_l)
-        self._A_e = kernel_matrix(self.h_e)
-        self._H_l = entropy(self._A_l @ (hist_l / self.n))
 
     def extrinsic(self, delta: np.ndarray) -> Extrinsic:
         return self.base.perturbed(delta[:3], delta[3:])
 
-    def value(self, delta: np.ndarray) -> float:
-        """MI (nats) at ``base`` corrected by ``delta``."""
-        e, _ = self._sample(delta, jacobian=False)
-        return self._mi_and_weights(self._soft_histogram(e), need_weights=False)[0]
+    def value(self, delta: np.ndarray) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
 
-    def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
-        """MI and its gradient with respect to ``delta``."""
-        delta = np.asarray(delta, dtype=np.float64)
-        e, de_ddelta = self._sample(delta, jacobian=True)
-        mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
-        # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
-        j = self._l_offset + e.astype(np.int32)
-        dmi_de = (W[j + 1] - W[j]).astype(np.float32)
-        g = (de_ddelta @ dmi_de).astype(np.float64)
-        g[3:] = left_jacobian(delta[3:]).T @ g[3:]
-        return mi, g
+    def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:  # pragma: no cover - abstract
+        raise NotImplementedError
 
     # --- internals -----------------------------------------------------------------------
     def _sample(self, delta: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -341,6 +371,66 @@ class SmoothObjective:
         out[3] = Q[1] * gZ - Q[2] * gY
         out[4] = Q[2] * gX - Q[0] * gZ
         out[5] = Q[0] * gY - Q[1] * gX
+
+    def _chain(self, de_ddelta: np.ndarray, dscore_de: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """Gradient with respect to ``delta`` from d score / d e per point."""
+        g = (de_ddelta @ dscore_de.astype(np.float32)).astype(np.float64)
+        g[3:] = left_jacobian(delta[3:]).T @ g[3:]
+        return g
+
+
+class EdgeObjective(MapObjective):
+    """The edge score (:mod:`l2e_studio.scoring.edges`) made smooth: bilinear lookup of the
+    band-passed edge map, weighted mean over the stage's fixed set of edge points."""
+
+    def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
+        super().__init__(stack, base, start)
+        if stack.weights is None:
+            raise ValueError("the edges objective needs a stack built for it")
+        total = float(stack.weights.sum())
+        self._w = (stack.weights / (edge_score.SCALE * max(total, 1e-12))).astype(np.float32)
+
+    def value(self, delta: np.ndarray) -> float:
+        e, _ = self._sample(np.asarray(delta, dtype=np.float64), jacobian=False)
+        return float(self._w @ (e - np.float32(edge_score.OFFSET)))
+
+    def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
+        delta = np.asarray(delta, dtype=np.float64)
+        e, de_ddelta = self._sample(delta, jacobian=True)
+        return float(self._w @ (e - np.float32(edge_score.OFFSET))), self._chain(de_ddelta, self._w, delta)
+
+
+class MIObjective(MapObjective):
+    """Differentiable MI (the paper's estimator made smooth) of the stage's fixed point set.
+
+    The Silverman widths are fixed when the objective is made (at ``start``) so that the
+    value and the gradient describe one and the same smooth function.
+    """
+
+    def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
+        super().__init__(stack, base, start)
+        self._l_offset = (stack.l_bins * N_BINS).astype(np.int32)
+        hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
+        self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
+        joint = self._soft_histogram(self._sample(self.start, jacobian=False)[0])
+        self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
+        self._A_l = kernel_matrix(self.h_l)
+        self._A_e = kernel_matrix(self.h_e)
+        self._H_l = entropy(self._A_l @ (hist_l / self.n))
+
+    def value(self, delta: np.ndarray) -> float:
+        """MI (nats) at ``base`` corrected by ``delta``."""
+        e, _ = self._sample(delta, jacobian=False)
+        return self._mi_and_weights(self._soft_histogram(e), need_weights=False)[0]
+
+    def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
+        """MI and its gradient with respect to ``delta``."""
+        delta = np.asarray(delta, dtype=np.float64)
+        e, de_ddelta = self._sample(delta, jacobian=True)
+        mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
+        # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
+        j = self._l_offset + e.astype(np.int32)
+        return mi, self._chain(de_ddelta, W[j + 1] - W[j], delta)
 
     def _soft_histogram(self, e: np.ndarray) -> np.ndarray:
         """(256, 256) joint histogram with E linearly split between its two nearest bins."""
@@ -431,12 +521,22 @@ def _project_inside(points: np.ndarray, R: np.ndarray, t: np.ndarray, camera: Ca
 
 
 def _stack_maps(
-    raw: Sequence[np.ndarray], kinds: Sequence[str], sigma: float, size: tuple[int, int] | None = None
+    raw: Sequence[np.ndarray],
+    kinds: Sequence[str],
+    sigma: float,
+    size: tuple[int, int] | None = None,
+    objective: str = "mi",
 ) -> np.ndarray:
-    """Prepared maps, one-pixel zero border; resized to ``size`` (w, h) before smoothing."""
+    """Maps prepared for ``objective``, resized to ``size`` (w, h) before smoothing, with a
+    one-pixel border that reads "nothing": zero counts for MI, "no edge" for edges."""
     h, w = raw[0].shape
     out_w, out_h = size or (w, h)
     factor = out_w / w
+    if objective == "edges":
+        out = np.full((len(raw), out_h + 2, out_w + 2), edge_score.OFFSET, dtype=np.float32)
+        for i, m in enumerate(raw):
+            out[i, 1:-1, 1:-1] = edge_score.edge_map(m, sigma * factor, (out_w, out_h))
+        return out
     out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
     for i, (m, kind) in enumerate(zip(raw, kinds)):
         m = np.clip(m, 0.0, CLIP[kind])

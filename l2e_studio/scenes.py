@@ -30,7 +30,7 @@ from .geometry import Extrinsic
 from .io.cameras import load_rig, load_seed
 from .io.events import EVENT_SUFFIXES
 from .io.lidar import LIDAR_SUFFIXES, load_lidar
-from .io.maps import MAP_SUFFIXES, load_map
+from .io.maps import MAP_SUFFIXES, guess_kind, load_map
 
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
@@ -71,6 +71,7 @@ class SceneSet:
     unpaired: list[str] = field(default_factory=list)
     seed_source: str = ""
     camera_source: str = ""
+    notes: list[str] = field(default_factory=list)  # one line each, worth telling the user
 
     @property
     def names(self) -> list[str]:
@@ -93,8 +94,10 @@ def load_scene_folder(
     camera_file: str | Path | None = None,
     on_scene: Callable[[int, int, str], None] | None = None,
     use_cache: bool = True,
+    map_kind: str | None = None,
 ) -> SceneSet:
-    """Load every scene of ``folder``.
+    """Load every scene of ``folder``; ``map_kind`` ("events" or "image") overrides the kind
+    found from each map's file and content.
 
     Raises :class:`InputError` when the folder, the camera or the seed cannot be used or when
     no scene loads; a single bad scene is recorded in ``failures`` instead.
@@ -123,7 +126,7 @@ def load_scene_folder(
         if on_scene:
             on_scene(i, len(pairs), stem)
         try:
-            scene = load_scene(stem, map_path, lidar_path, camera, root if use_cache else None)
+            scene = load_scene(stem, map_path, lidar_path, camera, root if use_cache else None, map_kind)
             if camera is None:
                 h, w = scene.event_map.shape
                 camera = rig.camera(w, h)
@@ -134,15 +137,26 @@ def load_scene_folder(
         details = "; ".join(f.error for f in failures[:3])
         raise InputError(root, f"none of the {len(pairs)} scenes loaded ({details})")
     assert camera is not None
-    return SceneSet(root, camera, seed, scenes, failures, unpaired, seed_source, str(rig_path))
+    notes = []
+    photos = [s for s in scenes if s.map_kind == "image" and s.map_path is not None and guess_kind(s.map_path) == "events"]
+    if photos and map_kind is None:
+        notes.append(f"{len(photos)} map(s) under {photos[0].map_path.parent} look like camera images, not accumulated "
+                     f"events (e.g. {photos[0].map_path.name}): scored as images; --map-kind events overrides")
+    return SceneSet(root, camera, seed, scenes, failures, unpaired, seed_source, str(rig_path), notes)
 
 
 def load_scene(
-    name: str, map_path: Path, lidar_path: Path, camera: CameraModel | None, cache_root: Path | None = None
+    name: str,
+    map_path: Path,
+    lidar_path: Path,
+    camera: CameraModel | None,
+    cache_root: Path | None = None,
+    map_kind: str | None = None,
 ) -> Scene:
-    """Read one scene; checks the map size against ``camera`` when it is known."""
+    """Read one scene; checks the map size against ``camera`` when it is known. ``map_kind``
+    ("events" or "image") overrides the kind found from the file and its content."""
     w, h = (camera.width, camera.height) if camera else (None, None)
-    event_map, kind = load_map(map_path, width=w, height=h)
+    event_map, kind = load_map(map_path, width=w, height=h, kind=map_kind)
     points, intensity = _load_scan_cached(lidar_path, cache_root)
     return Scene(name, points, intensity, event_map, kind, lidar_path, map_path)
 

@@ -166,7 +166,7 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
     snap = app.state.snapshot()
     r = snap.result
     assert snap.run.status == "done" and not r.cancelled
-    assert r.mi_result > r.mi_seed
+    assert r.score_result > r.score_seed
     # the MI curve: data on the server, a drawn uPlot in the page
     assert len(snap.run.history) == r.evaluations > 1
     wait_for(lambda: len(app.optimise.plot.data[0]) == len(snap.run.history), what="the curve's data")
@@ -175,14 +175,14 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
     screenshot(page, "03_optimised")
 
     open_tab(page, "Result")
-    page.get_by_text(f"{r.mi_result:.4f}").first.wait_for()
+    page.get_by_text(f"{r.score_result:.4f}").first.wait_for()
     page.get_by_role("button", name="Save result").click()
     page.get_by_text("Result saved").first.wait_for()
     saved = sorted((app.out_dir).glob("l2e_result_*.yaml"))
     assert len(saved) == 1
     doc = yaml.safe_load(saved[0].read_text())
     assert np.allclose(doc["T_cam_lidar"], r.extrinsic.matrix, atol=1e-9)
-    assert doc["mi"]["result"] == pytest.approx(r.mi_result)
+    assert doc["mi"]["result"] == pytest.approx(r.score_result)
     assert doc["scenes"] == list(app.state.scene_names)
     assert np.allclose(load_seed(saved[0]).params, r.extrinsic.params, atol=1e-8)
     png = cv2.imread(str(saved[0].with_name(saved[0].stem + "_before_after.png")))

@@ -24,9 +24,9 @@ def test_recovers_the_true_extrinsic_from_a_perturbed_seed(small_synth, k):
     res = calibrate(scenes, camera, seed)
     deg, m = res.extrinsic.error_to(truth)
     assert deg < 0.2 and m < 0.025, (deg, m)
-    assert res.mi_result > res.mi_seed
-    assert len(res.mi_result_per_scene) == len(scenes)
-    assert np.all(res.mi_result_per_scene > res.mi_seed_per_scene)
+    assert res.score_result > res.score_seed
+    assert len(res.score_result_per_scene) == len(scenes)
+    assert np.all(res.score_result_per_scene > res.score_seed_per_scene)
     assert res.evaluations == len(res.history) > 10
     assert not res.cancelled
 
@@ -95,7 +95,7 @@ def test_cancel_from_another_thread_stops_within_a_second(small_synth):
     res = out["res"]
     assert res.cancelled and res.message == "cancelled"
     assert res.evaluations >= 1
-    assert np.isfinite(res.mi_result)
+    assert np.isfinite(res.score_result)
 
 
 def test_unknown_optimiser_and_bad_bounds_are_rejected():

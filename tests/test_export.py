@@ -21,8 +21,8 @@ def fake_result() -> CalibrationResult:
     ext = seed.perturbed([0.01, -0.02, 0.005], np.radians([0.5, -1.0, 0.3]))
     return CalibrationResult(
         extrinsic=ext, seed=seed, settings=CalibrationSettings(), scene_names=["a", "b"],
-        mi_seed=0.30, mi_result=0.41, mi_seed_per_scene=np.array([0.25, 0.35]),
-        mi_result_per_scene=np.array([0.38, np.nan]), evaluations=57, seconds=1.234,
+        score_seed=0.30, score_result=0.41, score_seed_per_scene=np.array([0.25, 0.35]),
+        score_result_per_scene=np.array([0.38, np.nan]), evaluations=57, seconds=1.234,
         history=[(1, 0.3, 0)], message="ok", stages=(Stage(20.0, 150_000, 0.25), Stage(2.0)),
     )
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from l2e_studio.mi import N_BINS, kernel_matrix, mutual_information, silverman_bandwidth
+from l2e_studio.scoring.mi import N_BINS, kernel_matrix, mutual_information, silverman_bandwidth
 
 RNG = np.random.default_rng(3)
 

@@ -5,7 +5,7 @@ import pytest
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import project_points
-from l2e_studio.mi import mutual_information
+from l2e_studio.scoring.mi import mutual_information
 from l2e_studio.objective import SceneStack, prepare_map
 from l2e_studio.scenes import Scene
 

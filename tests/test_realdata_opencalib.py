@@ -153,7 +153,7 @@ def test_street_scenes_never_end_below_the_seed_and_are_flagged_as_unreliable() 
     dt, dr = _perturbations()[0]
     seed = ref.perturbed(dt, dr)
     result = calibrate(stack, None, seed)
-    assert result.mi_result >= result.mi_seed
+    assert result.score_result >= result.score_seed
     report = assess(stack, result.extrinsic, seed, subsets=2)
     assert any(w.startswith(("unstable", "flat")) for w in report.warnings), report.warnings
 

@@ -228,7 +228,7 @@ class App:
             verb = "cancelled" if r.cancelled else "finished"
             self.notify_all(
                 f"Optimisation {verb}",
-                f"MI {r.mi_seed:.4f} -> {r.mi_result:.4f} after {r.evaluations} evaluations "
+                f"MI {r.score_seed:.4f} -> {r.score_result:.4f} after {r.evaluations} evaluations "
                 f"({r.seconds:.1f} s). See the Result tab and Before / after.",
                 color="yellow" if r.cancelled else "green",
             )

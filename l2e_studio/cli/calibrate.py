@@ -12,6 +12,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..calibrate import METHODS, CalibrationSettings, calibrate, stack_scenes
+from ..scoring import OBJECTIVES
+from ..verdict import ON_UNTRUSTED, judge
 from ..errors import InputError
 from ..evaluate import assess
 from ..export import write_result
@@ -20,7 +22,7 @@ from ..samples import sample_scenes_dir
 from ..scenes import load_scene_folder
 
 NAME = "calibrate"
-HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder by MI maximisation (headless)."
+HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder (headless), with a verdict on the result."
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,6 +38,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="rotation bound per axis around the seed, degrees (default: %(default)s)")
     p.add_argument("--sigma", type=float, default=CalibrationSettings.sigma,
                    help="event-map smoothing of the final stage, pixels (default: %(default)s)")
+    p.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
+                   help="score to climb: mi (the paper's, for event maps), edges (lidar edges on image edges, for "
+                        "camera images); auto picks from the map kind (default)")
+    p.add_argument("--map-kind", choices=("events", "image"),
+                   help="treat every map as accumulated events or as a camera image (default: from file and content)")
+    p.add_argument("--on-untrusted", choices=ON_UNTRUSTED, default="keep-seed",
+                   help="when the verdict does not trust the result: keep the seed (default) or keep the result, marked")
+    p.add_argument("--no-verdict", action="store_true", help="skip the verdict (the optimiser's answer is written as is)")
     p.add_argument("--rotation-only", action="store_true", help="keep the seed's translation, optimise rotation")
     p.add_argument("--single-stage", action="store_true", help="no coarse-to-fine schedule")
     p.add_argument("--check", action="store_true",
@@ -56,13 +66,16 @@ def run(args: argparse.Namespace) -> int:
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("loading scenes", total=None)
         scene_set = load_scene_folder(
-            folder, args.seed, args.camera, on_scene=lambda i, n, name: prog.update(task, completed=i, total=n, description=f"loading {name}")
+            folder, args.seed, args.camera, map_kind=args.map_kind,
+            on_scene=lambda i, n, name: prog.update(task, completed=i, total=n, description=f"loading {name}"),
         )
         prog.update(task, completed=prog.tasks[0].total or 1, description=f"loaded {len(scene_set.scenes)} scenes")
     for msg in scene_set.unpaired:
         print(f"warning: unpaired file {msg}", file=sys.stderr)
     for fail in scene_set.failures:
         print(f"warning: skipped scene {fail.name}: {fail.error}", file=sys.stderr)
+    for note in scene_set.notes:
+        print(f"note: {note}", file=sys.stderr)
     t_loaded = time.perf_counter()
 
     seed = scene_set.seed
@@ -72,10 +85,16 @@ def run(args: argparse.Namespace) -> int:
 
         def on_progress(p) -> None:
             prog.update(task, completed=p.fraction,
-                        description=f"stage {p.stage + 1}/{p.stages}  eval {p.evaluations:4d}  MI {p.best_mi:.5f}")
+                        description=f"stage {p.stage + 1}/{p.stages}  eval {p.evaluations:4d}  {stack.objective_name} {p.best_mi:.5f}")
 
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
+
+    verdict = None
+    if not args.no_verdict:
+        with _progress(args.quiet, err) as prog:
+            prog.add_task("judging the result (halves, second start, second score)", total=None)
+            verdict = judge(stack, result, settings, on_untrusted=args.on_untrusted)
 
     quality = None
     if args.check:
@@ -85,14 +104,18 @@ def run(args: argparse.Namespace) -> int:
         quality = report.to_dict()
         for line in report.warnings:
             print(f"warning: {line}", file=sys.stderr)
-    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root, quality)
+    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root, quality, verdict)
     console = Console()
     if not args.quiet:
         console.print(_summary(result, scene_set.seed))
+    if verdict is not None:
+        console.print(f"verdict: {verdict.summary()}", highlight=False)
     console.print(f"result written to {out}" + (f" (previous file kept as {backup})" if backup else ""), highlight=False)
     console.print(
         f"{len(scene_set.scenes)} scenes, {stack.n_points} points; load {t_loaded - t_start:.2f} s, "
-        f"optimisation {result.seconds:.2f} s ({result.evaluations} evaluations), total {time.perf_counter() - t_start:.2f} s",
+        f"optimisation {result.seconds:.2f} s ({result.evaluations} evaluations)"
+        + (f", verdict {verdict.seconds:.2f} s" if verdict is not None else "")
+        + f", total {time.perf_counter() - t_start:.2f} s",
         highlight=False,
     )
     return 0
@@ -107,6 +130,7 @@ def _settings(args: argparse.Namespace) -> CalibrationSettings:
             sigma=args.sigma,
             rotation_only=args.rotation_only,
             coarse_to_fine=not args.single_stage,
+            objective=args.objective,
         )
     except ValueError as exc:
         raise InputError(None, str(exc)) from None
@@ -120,15 +144,15 @@ def _progress(quiet: bool, console: Console) -> Progress:
 
 
 def _summary(result, seed: Extrinsic) -> Table:
-    table = Table(title="L2E calibration", show_lines=False)
+    table = Table(title=f"L2E calibration ({result.objective} score)", show_lines=False)
     table.add_column("scene")
-    table.add_column("MI at seed", justify="right")
-    table.add_column("MI at result", justify="right")
+    table.add_column("score at seed", justify="right")
+    table.add_column("score at result", justify="right")
     table.add_column("change", justify="right")
-    for name, a, b in zip(result.scene_names, result.mi_seed_per_scene, result.mi_result_per_scene):
+    for name, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene):
         table.add_row(name, f"{a:.4f}", f"{b:.4f}", f"{b - a:+.4f}")
-    table.add_row("[b]all scenes[/]", f"[b]{result.mi_seed:.4f}[/]", f"[b]{result.mi_result:.4f}[/]",
-                  f"[b]{result.mi_result - result.mi_seed:+.4f}[/]", end_section=True)
+    table.add_row("[b]all scenes[/]", f"[b]{result.score_seed:.4f}[/]", f"[b]{result.score_result:.4f}[/]",
+                  f"[b]{result.score_result - result.score_seed:+.4f}[/]", end_section=True)
     ext = result.extrinsic
     dr, dt = seed.error_to(ext)
     table.caption = (

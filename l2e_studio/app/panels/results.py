@@ -62,12 +62,12 @@ class ResultPanel:
         state = "cancelled (best point so far)" if r.cancelled else "finished"
         self.summary.content = (
             f"**Run {state}** · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
-            f"**MI {r.mi_seed:.4f} → {r.mi_result:.4f}** ({r.mi_result - r.mi_seed:+.4f}) over "
+            f"**MI {r.score_seed:.4f} → {r.score_result:.4f}** ({r.score_result - r.score_seed:+.4f}) over "
             f"{len(r.scene_names)} scenes  \n"
             f"moved {err_deg:.3f}° / {100 * err_m:.2f} cm from its seed  \n"
             f"{describe(r.extrinsic, self.app.state.reference)}"
         )
         rows = ["| scene | MI seed | MI result | Δ |", "|:--|--:|--:|--:|"]
-        for name, a, b in zip(r.scene_names, r.mi_seed_per_scene, r.mi_result_per_scene):
+        for name, a, b in zip(r.scene_names, r.score_seed_per_scene, r.score_result_per_scene):
             rows.append(f"| {name} | {a:.4f} | {b:.4f} | {b - a:+.4f} |")
         self.table.content = "\n".join(rows)

@@ -1,0 +1,133 @@
+"""Real dev rigs (../shared/realdata): closer / kept / worse than the seed, old objective vs new.
+
+Per rig and seed level (1 deg / 5 cm, 2 deg / 10 cm, 5 deg / 20 cm; random axis and direction,
+fixed RNG), calibrate from reference-perturbed seeds with
+* ``old``: the paper's MI, no verdict (the tool before the structure-aware objective), and
+* ``new``: the default (objective chosen from the map kind, multi-start, verdict).
+A run is *worse* when its rotation error grows by > 0.1 deg or its translation error by > 1 cm,
+*closer* when it is not worse and one of them shrinks by more than that, else *kept*.
+Also: runs started at the reference, and one-axis sweeps of the new objective (PNG).
+
+    python benchmarks/bench_realdata.py [--runs 20] [--rigs manual,1+2,3,kitti] [--sweeps]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from realdata_rigs import load_rigs, perturbations  # noqa: E402
+
+from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  # noqa: E402
+from l2e_studio.verdict import judge  # noqa: E402
+
+LEVELS = ((1.0, 0.05), (2.0, 0.10), (5.0, 0.20))
+OUT = Path(__file__).resolve().parent / "out"
+
+
+def classify(seed_err: tuple[float, float], end_err: tuple[float, float]) -> str:
+    dr, dt = end_err[0] - seed_err[0], end_err[1] - seed_err[1]
+    if dr > 0.1 or dt > 0.01:
+        return "worse"
+    return "closer" if dr < -0.1 or dt < -0.01 else "kept"
+
+
+def run_rig(rig, runs: int, levels, variants) -> list[dict]:
+    rows = []
+    wide = CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0)
+    for variant in variants:
+        settings = CalibrationSettings(objective="mi", global_search=False) if variant == "old" else CalibrationSettings()
+        stack = stack_scenes(rig.scenes, rig.camera, rig.reference, wide if variant == "new" else
+                             CalibrationSettings(objective="mi", translation_bound=0.5, rotation_bound_deg=20.0))
+        for li, (deg, m) in enumerate(levels):
+            starts = perturbations(runs, deg, m, 1000 + li) if deg > 0 else [(np.zeros(3), np.zeros(3))] * 2
+            for dt, dr in starts:
+                seed = rig.reference.perturbed(dt, dr)
+                t0 = time.perf_counter()
+                result = calibrate(stack, None, seed, settings)
+                status, end = "-", result.extrinsic
+                if variant == "new":
+                    v = judge(stack, result, settings)
+                    status, end = v.status, v.extrinsic
+                seconds = time.perf_counter() - t0
+                se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
+                rows.append(dict(rig=rig.name, variant=variant, level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
+                                 end_deg=ee[0], end_m=ee[1], cls=classify(se, ee), status=status, seconds=seconds))
+                print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
+                      f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s", flush=True)
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["| rig | seeds | objective | closer | kept | worse | median end error | trusted / rot. only / not |",
+             "|---|---|---|---|---|---|---|---|"]
+    keys = []
+    for r in rows:
+        k = (r["rig"], r["level"], r["variant"])
+        if k not in keys:
+            keys.append(k)
+    for rig, level, variant in keys:
+        sel = [r for r in rows if (r["rig"], r["level"], r["variant"]) == (rig, level, variant)]
+        c = {k: sum(r["cls"] == k for r in sel) for k in ("closer", "kept", "worse")}
+        med = f"{np.median([r['end_deg'] for r in sel]):.2f} deg / {100 * np.median([r['end_m'] for r in sel]):.1f} cm"
+        st = "-" if variant == "old" else "/".join(str(sum(r["status"] == s for r in sel)) for s in ("trusted", "trusted-rotation", "not-trusted"))
+        name = "paper MI" if variant == "old" else "new (auto + verdict)"
+        lines.append(f"| {rig} | {level} | {name} | {c['closer']} | {c['kept']} | {c['worse']} | {med} | {st} |")
+    return "\n".join(lines)
+
+
+def sweeps(rigs, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axes = ("x (m)", "y (m)", "z (m)", "rot x (deg)", "rot y (deg)", "rot z (deg)")
+    fig, grid = plt.subplots(len(rigs), 6, figsize=(18, 2.6 * len(rigs)), squeeze=False)
+    for i, rig in enumerate(rigs):
+        stack = stack_scenes(rig.scenes, rig.camera, rig.reference, CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0))
+        final = stack.with_sigma(CalibrationSettings().sigma)
+        for k in range(6):
+            steps = np.linspace(-0.3, 0.3, 41) if k < 3 else np.linspace(-3.0, 3.0, 41)
+            vals = []
+            for s in steps:
+                d = np.zeros(6)
+                d[k] = s if k < 3 else np.radians(s)
+                vals.append(final.score(rig.reference.perturbed(d[:3], d[3:]), per_scene=False)[0])
+            ax = grid[i, k]
+            ax.plot(steps, vals)
+            ax.axvline(0.0, color="k", lw=0.8)
+            peak = steps[int(np.argmax(vals))]
+            ax.set_title(f"{rig.name}: peak at {peak:+.3g}", fontsize=9)
+            ax.set_xlabel(axes[k], fontsize=8)
+            print(f"sweep {rig.name:6s} {axes[k]:12s} peak at {peak:+.3f}", flush=True)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--runs", type=int, default=20)
+    p.add_argument("--rigs", default="manual,1+2,3,kitti")
+    p.add_argument("--variants", default="old,new")
+    p.add_argument("--sweeps", action="store_true")
+    args = p.parse_args()
+    rigs = load_rigs(args.rigs.split(","))
+    if not rigs:
+        sys.exit("no real data found under ../shared/realdata")
+    if args.sweeps:
+        sweeps(rigs, OUT / "realdata_sweeps.png")
+    rows = []
+    for rig in rigs:
+        rows += run_rig(rig, args.runs, LEVELS + ((0.0, 0.0),), args.variants.split(","))
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,79 @@
+"""The real dev rigs in ../shared/realdata (read in place, never copied), as scenes + camera +
+reference extrinsic. Used by bench_realdata.py and the real-data tests; absent data -> empty."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from l2e_studio.camera import CameraModel
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.io.cameras import load_rig, load_seed
+from l2e_studio.io.lidar import load_lidar
+from l2e_studio.io.maps import load_map
+from l2e_studio.scenes import Scene
+
+REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+OPENCALIB = REALDATA / "opencalib_lidar2camera"
+KITTI = REALDATA / "kitti_mmdet3d_000008"
+
+
+@dataclass(frozen=True)
+class Rig:
+    name: str
+    camera: CameraModel
+    reference: Extrinsic
+    scenes: tuple[Scene, ...]
+
+
+def _image(folder: Path) -> Path:
+    return next(p for p in sorted(folder.iterdir()) if p.suffix in (".jpg", ".png"))
+
+
+def _scene(name: str, lidar: Path, image: Path) -> tuple[Scene, np.ndarray]:
+    scan = load_lidar(lidar)
+    grey, kind = load_map(image)
+    return Scene(name, scan.points, scan.intensity, grey, kind, lidar, image), grey
+
+
+def load_rigs(names: list[str] | None = None) -> list[Rig]:
+    """The four dev rigs (OpenCalib manual, OpenCalib 1+2, OpenCalib 3, KITTI 000008) that are present."""
+    rigs: list[Rig] = []
+    want = set(names or ["manual", "1+2", "3", "kitti"])
+    if "manual" in want and (OPENCALIB / "manual_calib").is_dir():
+        d = OPENCALIB / "manual_calib" / "data"
+        sc, grey = _scene("manual", d / "0.pcd", d / "0.png")
+        rig = load_rig(d / "center_camera-intrinsic.json")  # its json says 1080 rows; the image wins
+        rigs.append(Rig("manual", rig.camera(grey.shape[1], grey.shape[0]),
+                        load_seed(d / "top_center_lidar-to-center_camera-extrinsic.json"), (sc,)))
+    for group in (["1", "2"], ["3"]):
+        if "+".join(group) not in want:
+            continue
+        root = OPENCALIB / "auto_calib_v2.0" / "data" / "ours"
+        if not all((root / n).is_dir() for n in group):
+            continue
+        scenes = []
+        for n in group:
+            sc, grey = _scene(n, root / n / "calib.pcd", _image(root / n))
+            scenes.append(sc)
+        rig = load_rig(root / group[0] / "calib.txt")
+        rigs.append(Rig("+".join(group), rig.camera(grey.shape[1], grey.shape[0]), rig.seed, tuple(scenes)))
+    if "kitti" in want and KITTI.is_dir():
+        c = json.loads((KITTI / "calib_derived.json").read_text())
+        camera = CameraModel(np.array(c["K"]), c["image_width"], c["image_height"], np.array(c["D"], float))
+        sc, _ = _scene("000008", KITTI / "000008.bin", KITTI / "000008.png")
+        rigs.append(Rig("kitti", camera, Extrinsic.from_matrix(np.array(c["T_cam_lidar"])), (sc,)))
+    return rigs
+
+
+def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``n`` (dt, drotvec) offsets of exactly ``m`` metres and ``deg`` degrees, random axes and directions."""
+    rng = np.random.default_rng(rng_seed)
+    out = []
+    for _ in range(n):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        out.append((m * a / np.linalg.norm(a), np.radians(deg) * b / np.linalg.norm(b)))
+    return out

@@ -1,0 +1,112 @@
+"""Structure, not regions: lidar edges against image edges (after Levinson and Thrun, RSS 2013).
+
+MI of lidar intensity against a camera's grey values is dominated by large regions (sky, road,
+shadow), so on real street images its peak sits degrees from the truth. What pins the geometry
+is where things *change*: depth discontinuities and reflectivity steps in the scan, and
+brightness edges in the image. This module holds both sides of that score:
+
+* :func:`lidar_edge_weights`: per point, how strongly it sits on a foreground depth edge or an
+  intensity step, measured against its horizontal neighbours in the scan (neighbours found by
+  direction with a k-d tree, so any scan pattern works: spinning, MEMS, cropped or unordered).
+  Vertical neighbours are left out: on the ground, consecutive rings are metres apart at range,
+  which is no edge.
+* :func:`edge_map`: the image's gradient magnitude, normalised by its 99th percentile (contrast
+  does not matter, saturated sky has no gradient), smoothed at the stage's sigma and
+  **band-passed** (its local mean removed), so that a textured region (foliage, gravel) scores
+  about zero wherever points land on it and only edges that line up precisely count.
+
+The score is the weighted mean of the band-passed edge map under the projected edge points; a
+point that leaves the image reads zero, so the score cannot grow by losing points.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: Neighbours (by direction) compared with each point.
+NEIGHBOURS = 12
+#: A neighbour is "horizontal" when its elevation differs by less than this share of its azimuth offset.
+HORIZONTAL = 0.5
+#: A depth jump of ``DEPTH_JUMP_M + DEPTH_JUMP_REL * range`` gives full weight.
+DEPTH_JUMP_M = 0.2
+DEPTH_JUMP_REL = 0.02
+#: An intensity step of this many grey levels (of 255) gives full weight.
+INTENSITY_STEP = 60.0
+#: Points lighter than this are no edge at all (and are left out of the objective).
+MIN_WEIGHT = 0.05
+#: The band-pass removes a local mean this many times wider than the stage's smoothing.
+BANDPASS = 4.0
+#: Stored edge maps: value = OFFSET + SCALE * band-passed edge (0..255, OFFSET meaning "no edge").
+OFFSET = 128.0
+SCALE = 127.0
+
+
+def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
+    """(N,) weights in [0, 1]: the larger of a point's foreground depth jump and intensity step
+    against its horizontal neighbours (lidar frame, z up)."""
+    P = np.asarray(points, dtype=np.float64)
+    n = len(P)
+    if n < NEIGHBOURS + 1:
+        return np.zeros(n, dtype=np.float32)
+    r = np.linalg.norm(P, axis=1)
+    ok = np.isfinite(r) & (r > 1e-6)
+    d = np.zeros_like(P)
+    d[ok] = P[ok] / r[ok, None]
+    az = np.arctan2(P[:, 1], P[:, 0])
+    el = np.arcsin(np.clip(d[:, 2], -1.0, 1.0))
+    _, nb = cKDTree(d).query(d, k=NEIGHBOURS + 1, workers=-1)
+    nb = nb[:, 1:]
+    daz = np.abs(np.angle(np.exp(1j * (az[nb] - az[:, None]))))
+    horizontal = np.abs(el[nb] - el[:, None]) < HORIZONTAL * daz
+    jump = np.where(horizontal, r[nb] - r[:, None], 0.0).max(axis=1)  # > 0: this point is in front
+    inten = np.asarray(intensity, dtype=np.float64)
+    step = np.where(horizontal, np.abs(inten[nb] - inten[:, None]), 0.0).max(axis=1)
+    w = np.maximum(np.clip(jump / (DEPTH_JUMP_M + DEPTH_JUMP_REL * r), 0.0, 1.0), np.clip(step / INTENSITY_STEP, 0.0, 1.0))
+    w[~ok] = 0.0
+    return w.astype(np.float32)
+
+
+def gradient_magnitude(image: np.ndarray) -> np.ndarray:
+    """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1."""
+    g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
+    m = cv2.magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+    p99 = float(np.percentile(m, 99))
+    if p99 <= 0:
+        return np.zeros_like(m)
+    return np.minimum(m / p99, 1.0)
+
+
+def edge_map(image: np.ndarray, sigma: float, size: tuple[int, int] | None = None) -> np.ndarray:
+    """The map the edge score reads: gradient magnitude, optionally resized to ``size`` (w, h),
+    smoothed with ``sigma`` (pixels of the output) and band-passed, stored as
+    ``OFFSET + SCALE * value`` in float32 (so that 0..255 holds it, OFFSET meaning no edge)."""
+    m = gradient_magnitude(image)
+    if size is not None and size != (m.shape[1], m.shape[0]):
+        m = cv2.resize(m, size, interpolation=cv2.INTER_AREA)
+    s = max(float(sigma), 0.5)
+    m = cv2.GaussianBlur(m, (0, 0), s, borderType=cv2.BORDER_REFLECT)
+    m = m - cv2.GaussianBlur(m, (0, 0), BANDPASS * s, borderType=cv2.BORDER_REFLECT)
+    return (OFFSET + SCALE * np.clip(m, -1.0, 1.0)).astype(np.float32)
+
+
+def edge_score(values: np.ndarray, weights: np.ndarray) -> float:
+    """The weighted mean band-passed edge value (-1..1) of points that read ``values`` (0..255)."""
+    total = float(weights.sum())
+    if total <= 0:
+        return 0.0
+    return float(weights @ (np.asarray(values, dtype=np.float64) - OFFSET)) / (SCALE * total)
+
+
+def canny_distance(image: np.ndarray) -> np.ndarray:
+    """Distance (px) from each pixel to the nearest Canny edge of the image (thresholds from the
+    gradient's own percentiles, so they follow the image's contrast)."""
+    g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.5)
+    g8 = cv2.normalize(g, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    grad = cv2.magnitude(cv2.Sobel(g8, cv2.CV_32F, 1, 0), cv2.Sobel(g8, cv2.CV_32F, 0, 1))
+    hi = float(np.percentile(grad, 90))
+    edges = cv2.Canny(g8, 0.5 * hi, hi, L2gradient=True)
+    if not edges.any():
+        return np.full(g.shape, np.inf, dtype=np.float32)
+    return cv2.distanceTransform(255 - edges, cv2.DIST_L2, 3)

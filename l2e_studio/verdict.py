@@ -1,0 +1,203 @@
+"""Is a calibration result to be trusted? Evidence the optimiser did not climb, and a decision.
+
+A score's maximum is only as good as the score, and on real recordings a score can peak degrees
+from the truth. So the result is judged by what the optimiser never saw or never maximised:
+
+* **halves**: the scenes are split in two (a single scene: its points left and right of the image
+  centre). Each half on its own must score the result above the seed (the optimiser only saw
+  their sum), and the result must be a peak of each half: refined on one half alone, it stays.
+* **an independent second score**: for camera images, the share of lidar edge points that land
+  within a few pixels of a Canny edge (binary edges, no smoothing, no band-pass: not what the
+  edge objective climbs); for event maps, the paper's MI on the raw maps.
+* **a second start**: the seed mirrored through the result; calibrated from there, it must come
+  back to the result (a side peak reached from the seed seldom attracts both sides).
+* **the result's own score** must beat the seed's.
+
+All agree: ``trusted``. The halves agree on rotation but not on translation (one or two street
+scans seldom pin the translation): ``trusted-rotation``, the seed's translation is kept and the
+rotation re-fitted to it. Otherwise ``not-trusted``: the seed is handed back (the default) or
+the result is kept and marked, as the caller chooses; each failed check gives one line of why.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .calibrate import CalibrationResult, CalibrationSettings, calibrate
+from .geometry import Extrinsic
+from .objective import SceneStack
+from .scoring.edges import canny_distance, lidar_edge_weights
+
+STATUSES = ("trusted", "trusted-rotation", "not-trusted")
+ON_UNTRUSTED = ("keep-seed", "mark")
+AGREE_DEG = 0.3  # the two halves' answers must agree this well ...
+AGREE_M = 0.03  # ... in rotation and in translation
+EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distance (at 1280 px wide)
+SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
+MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
+
+
+@dataclass(frozen=True)
+class Check:
+    name: str
+    passed: bool
+    detail: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The decision on one result: ``status``, the extrinsic handed back, and why."""
+
+    status: str
+    extrinsic: Extrinsic
+    kept_seed: bool
+    reasons: tuple[str, ...]  # one line per failed check (empty when trusted)
+    checks: tuple[Check, ...]
+    seconds: float
+
+    @property
+    def trusted(self) -> bool:
+        return self.status != "not-trusted"
+
+    def summary(self) -> str:
+        """One line a user understands."""
+        if self.status == "trusted":
+            return "trusted: held-out halves and an independent score agree with the result"
+        if self.status == "trusted-rotation":
+            return "rotation trusted; translation not observable from these scenes, the seed's translation is kept"
+        action = "the seed is kept" if self.kept_seed else "the result is kept but marked not trusted"
+        return f"not trusted ({'; '.join(self.reasons)}): {action}"
+
+    def to_dict(self) -> dict:
+        return {
+            "status": self.status,
+            "summary": self.summary(),
+            "kept_seed": self.kept_seed,
+            "reasons": list(self.reasons),
+            "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
+            "seconds": round(self.seconds, 3),
+        }
+
+
+def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
+    """Two disjoint point masks: alternate scenes, or (one scene) left and right of the image centre at ``at``."""
+    if stack.n_scenes >= 2:
+        a = (stack.scene_of % 2) == 0
+    else:
+        uv, _ = stack.project(at)
+        a = uv[:, 0] < stack.camera.width / 2.0
+    return a, ~a
+
+
+def mirrored_start(seed: Extrinsic, result: Extrinsic) -> Extrinsic:
+    """The seed mirrored through the result (at least ``MIRROR_DEG`` / ``MIRROR_M`` from it): a
+    second start on the far side, so a side peak reached from the seed is unlikely to attract it."""
+    dt, dw = result.delta_to(seed)
+    deg, m = np.degrees(np.linalg.norm(dw)), np.linalg.norm(dt)
+    dw = dw * (MIRROR_DEG / deg) if deg < MIRROR_DEG and deg > 1e-9 else dw
+    dt = dt * (MIRROR_M / m) if m < MIRROR_M and m > 1e-9 else dt
+    if deg <= 1e-9:
+        dw = np.radians(MIRROR_DEG) * np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)
+    if m <= 1e-9:
+        dt = MIRROR_M * np.array([1.0, -1.0, 1.0]) / np.sqrt(3.0)
+    return result.perturbed(-dt, -dw)
+
+
+def second_score(stack: SceneStack, ext: Extrinsic) -> tuple[str, float]:
+    """The independent score: edge agreement for camera images, the paper's MI for event maps."""
+    if all(k == "events" for k in stack.map_kinds):
+        return "paper MI on the raw maps", stack.with_sigma(0.0).mi(ext, per_scene=False)[0]
+    return "edge points on Canny edges", edge_agreement(stack, ext)
+
+
+def edge_agreement(stack: SceneStack, ext: Extrinsic) -> float:
+    """Weighted share of lidar edge points within ``EDGE_RADIUS_PX`` of a Canny edge of their map."""
+    weights = stack.weights
+    if weights is None:
+        weights = np.zeros(stack.n_points, dtype=np.float32)
+        for s in range(stack.n_scenes):
+            m = stack.scene_of == s
+            weights[m] = lidar_edge_weights(stack.points[:, m].T, stack.l_bins[m].astype(np.float32))
+    cam = stack.full_camera or stack.camera
+    full = replace(stack, camera=cam)
+    uv, inside = full.project(ext)
+    radius = EDGE_RADIUS_PX * cam.width / 1280.0
+    near = np.zeros(stack.n_points, dtype=bool)
+    for s, raw in enumerate(stack.raw_maps):
+        m = inside & (stack.scene_of == s)
+        dist = canny_distance(raw)
+        px = np.rint(uv[m]).astype(np.int64)
+        near[m] = dist[px[:, 1], px[:, 0]] <= radius
+    total = float(weights.sum())
+    return float(weights[near].sum() / total) if total > 0 else 0.0
+
+
+def judge(
+    stack: SceneStack,
+    result: CalibrationResult,
+    settings: CalibrationSettings = CalibrationSettings(),
+    on_untrusted: str = "keep-seed",
+    cancel: threading.Event | None = None,
+) -> Verdict:
+    """Judge ``result`` (a calibration of ``stack`` from ``result.seed``) on evidence it did not climb."""
+    if on_untrusted not in ON_UNTRUSTED:
+        raise ValueError(f"on_untrusted must be one of {', '.join(ON_UNTRUSTED)}")
+    t0 = time.perf_counter()
+    seed, res = result.seed, result.extrinsic
+    final = stack.with_sigma(settings.sigma)
+    checks: list[Check] = []
+
+    gain = result.score_result - result.score_seed
+    checks.append(Check("score", gain > 0, f"{result.objective} score {result.score_seed:.4f} -> {result.score_result:.4f}"))
+
+    name, before = second_score(final, seed)
+    _, after = second_score(final, res)
+    slack = SECOND_SCORE_SLACK if name.startswith("edge") else 0.0
+    checks.append(Check("second score", after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
+
+    a, b = halves(final, seed)
+    if a.sum() == 0 or b.sum() == 0:
+        checks.append(Check("halves", False, "too few points to split into two halves"))
+    else:
+        # each half on its own must prefer the result to the seed, and the result must be a
+        # peak of each half: refined on one half alone, it stays where it is
+        local = replace(settings, coarse_to_fine=False, global_search=False)
+        better, detail, rot_moved, trans_moved = True, [], [], []
+        for mine in (a, b):
+            half = final.select(mine)
+            s_seed, s_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
+            better &= s_res > s_seed
+            detail.append(f"{s_seed:.4f} -> {s_res:.4f}")
+            rot_moved.append(calibrate(half, None, res, replace(local, rotation_only=True), cancel=cancel).extrinsic.error_to(res)[0])
+            trans_moved.append(calibrate(half, None, res, local, cancel=cancel).extrinsic.error_to(res)[1])
+        checks.append(Check("both halves prefer the result", better, "score of each half, seed -> result: " + ", ".join(detail)))
+        checks.append(Check("halves agree (rotation)", max(rot_moved) <= AGREE_DEG,
+                            f"refined on either half alone the rotation moves {max(rot_moved):.3f} deg (limit {AGREE_DEG})"))
+        checks.append(Check("halves agree (translation)", max(trans_moved) <= AGREE_M,
+                            f"refined on either half alone the translation moves {100 * max(trans_moved):.1f} cm "
+                            f"(limit {100 * AGREE_M:.0f})"))
+
+    # a start on the far side of the result must come back to it
+    other = calibrate(final, None, mirrored_start(seed, res), settings, cancel=cancel).extrinsic
+    deg, m = other.error_to(res)
+    checks.append(Check("second start (rotation)", deg <= AGREE_DEG,
+                        f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {AGREE_DEG})"))
+    checks.append(Check("second start (translation)", m <= AGREE_M,
+                        f"from a start mirrored through the result it ends {100 * m:.1f} cm away (limit {100 * AGREE_M:.0f})"))
+
+    failed = [c for c in checks if not c.passed]
+    reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
+    if not failed:
+        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0)
+    if all(c.name.endswith("(translation)") for c in failed):
+        refit = calibrate(final, None, Extrinsic(res.rotvec, seed.translation),
+                          replace(settings, rotation_only=True, coarse_to_fine=False, global_search=False),
+                          cancel=cancel).extrinsic
+        refit = Extrinsic(refit.rotvec, seed.translation)
+        return Verdict("trusted-rotation", refit, False, reasons, tuple(checks), time.perf_counter() - t0)
+    keep = on_untrusted == "keep-seed"
+    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
