@@ -182,7 +182,7 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
     assert len(saved) == 1
     doc = yaml.safe_load(saved[0].read_text())
     assert np.allclose(doc["T_cam_lidar"], r.extrinsic.matrix, atol=1e-9)
-    assert doc["mi"]["result"] == pytest.approx(r.score_result)
+    assert doc["score"]["result"] == pytest.approx(r.score_result)
     assert doc["scenes"] == list(app.state.scene_names)
     assert np.allclose(load_seed(saved[0]).params, r.extrinsic.params, atol=1e-8)
     png = cv2.imread(str(saved[0].with_name(saved[0].stem + "_before_after.png")))

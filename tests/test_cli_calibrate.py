@@ -42,7 +42,7 @@ def test_calibrate_writes_a_result_near_the_truth(small_synth_dir, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "all scenes" in proc.stdout and f"result written to {out}" in proc.stdout
     data = json.loads(out.read_text())
-    assert data["mi"]["result"] > data["mi"]["seed"]
+    assert data["score"]["result"] > data["score"]["seed"]
     assert len(data["scenes"]) == 4 and data["optimisation_seconds"] > 0
     deg, m = load_seed(out).error_to(read_truth(small_synth_dir / "truth.yaml"))
     assert deg < 0.2 and m < 0.025

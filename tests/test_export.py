@@ -46,8 +46,8 @@ def test_result_file_holds_every_representation_and_reads_back_as_a_seed(tmp_pat
     assert np.allclose(data["seed"]["T_cam_lidar"], res.seed.matrix, atol=1e-9)
     assert data["bounds"] == {"translation_m": 0.2, "rotation_deg": 10.0}
     assert data["optimiser"]["method"] == "SLSQP" and len(data["optimiser"]["stages"]) == 2
-    assert data["mi"]["seed"] == 0.30 and data["mi"]["result"] == 0.41
-    assert data["mi"]["per_scene"] == [{"scene": "a", "seed": 0.25, "result": 0.38}, {"scene": "b", "seed": 0.35, "result": None}]
+    assert data["score"]["seed"] == 0.30 and data["score"]["result"] == 0.41
+    assert data["score"]["per_scene"] == [{"scene": "a", "seed": 0.25, "result": 0.38}, {"scene": "b", "seed": 0.35, "result": None}]
     assert data["evaluations"] == 57 and data["optimisation_seconds"] == pytest.approx(1.234)
     assert data["scenes"] == ["a", "b"] and data["camera"]["width"] == 640
     assert np.allclose(load_seed(path).matrix, T, atol=1e-9)
