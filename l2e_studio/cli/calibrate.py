@@ -7,20 +7,15 @@ import sys
 import time
 from pathlib import Path
 
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
-
-from ..calibrate import METHODS, CalibrationSettings, calibrate, stack_scenes
 from ..errors import InputError
-from ..evaluate import assess
-from ..export import write_result
-from ..geometry import Extrinsic
-from ..samples import sample_scenes_dir
-from ..scenes import load_scene_folder
 
 NAME = "calibrate"
 HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder by MI maximisation (headless)."
+
+#: The engine's optimisers and defaults, written out so that ``--help`` needs no numpy/scipy import
+#: (tests/test_cli_inputs.py checks them against :mod:`l2e_studio.calibrate`).
+METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
+DEFAULTS = {"translation_bound": 0.2, "rotation_bound_deg": 10.0, "sigma": 2.0}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,11 +25,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("l2e_result.yaml"),
                    help="result file, YAML or .json (default: ./l2e_result.yaml; an existing file is kept as a backup)")
     p.add_argument("--method", choices=METHODS, default="SLSQP", help="optimiser (default: SLSQP)")
-    p.add_argument("--bound-m", type=float, default=CalibrationSettings.translation_bound,
+    p.add_argument("--bound-m", type=float, default=DEFAULTS["translation_bound"],
                    help="translation bound per axis around the seed, metres (default: %(default)s)")
-    p.add_argument("--bound-deg", type=float, default=CalibrationSettings.rotation_bound_deg,
+    p.add_argument("--bound-deg", type=float, default=DEFAULTS["rotation_bound_deg"],
                    help="rotation bound per axis around the seed, degrees (default: %(default)s)")
-    p.add_argument("--sigma", type=float, default=CalibrationSettings.sigma,
+    p.add_argument("--sigma", type=float, default=DEFAULTS["sigma"],
                    help="event-map smoothing of the final stage, pixels (default: %(default)s)")
     p.add_argument("--rotation-only", action="store_true", help="keep the seed's translation, optimise rotation")
     p.add_argument("--single-stage", action="store_true", help="no coarse-to-fine schedule")
@@ -45,6 +40,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from ..calibrate import calibrate, stack_scenes
+    from ..evaluate import assess
+    from ..export import write_result
+    from ..samples import sample_scenes_dir
+    from ..scenes import load_scene_folder
+
     err = Console(stderr=True)
     t_start = time.perf_counter()
     settings = _settings(args)
@@ -98,7 +101,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _settings(args: argparse.Namespace) -> CalibrationSettings:
+def _settings(args: argparse.Namespace):
+    from ..calibrate import CalibrationSettings
+
     try:
         return CalibrationSettings(
             method=args.method,
@@ -112,14 +117,18 @@ def _settings(args: argparse.Namespace) -> CalibrationSettings:
         raise InputError(None, str(exc)) from None
 
 
-def _progress(quiet: bool, console: Console) -> Progress:
+def _progress(quiet: bool, console):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
     return Progress(
         TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
         console=console, disable=quiet or not console.is_terminal, transient=False,
     )
 
 
-def _summary(result, seed: Extrinsic) -> Table:
+def _summary(result, seed):
+    from rich.table import Table
+
     table = Table(title="L2E calibration", show_lines=False)
     table.add_column("scene")
     table.add_column("MI at seed", justify="right")
