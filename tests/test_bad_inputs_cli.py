@@ -8,7 +8,9 @@ folder) and returns the command line and the fragments the error line must conta
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import stat
 from pathlib import Path
 from typing import Callable
 
@@ -177,7 +179,49 @@ OPTION_CASES = {
     "sigma-negative": (_option_case("--sigma", "-1"), ["--sigma"]),
 }
 
-ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES}
+def _out_case(make: Callable[[Path], Path], *extra: str) -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        out = make(tmp)
+        return ["calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", out, *extra], out
+    return build
+
+
+def _fifo(tmp: Path) -> Path:
+    os.mkfifo(tmp / "fifo.yaml")
+    return tmp / "fifo.yaml"
+
+
+def _device(tmp: Path) -> Path:
+    """A private character device like /dev/null (a regression replaces this one, not the real one)."""
+    try:
+        os.mknod(tmp / "null", stat.S_IFCHR | 0o666, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("creating a device node needs root")
+    return tmp / "null"
+
+
+def _symlink(tmp: Path, target: str = "real.yaml") -> Path:
+    (tmp / "link.yaml").symlink_to(tmp / target)
+    if target == "real.yaml":
+        (tmp / target).write_text("old: 1\n")
+    return tmp / "link.yaml"
+
+
+def _file_parent(tmp: Path) -> Path:
+    (tmp / "afile").write_text("x")
+    return tmp / "afile" / "sub" / "r.yaml"
+
+
+OUTPUT_CASES = {
+    "out-device": (_out_case(lambda tmp: _device(tmp)), ["device"]),
+    "out-fifo": (_out_case(_fifo), ["FIFO"]),
+    "out-folder": (_out_case(lambda tmp: tmp / "scenes"), ["folder"]),
+    "out-symlink": (_out_case(_symlink), ["symbolic link"]),
+    "out-dangling-symlink": (_out_case(lambda tmp: _symlink(tmp, "missing.yaml")), ["symbolic link"]),
+    "out-parent-is-file": (_out_case(_file_parent), ["is a file"]),
+}
+
+ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
@@ -188,3 +232,25 @@ def test_bad_input_is_one_line_exit_2(name: str, tmp: Path) -> None:
     assert_one_line_error(run, str(named), *fragments)
     assert run.peak_rss_mb < RSS_BOUND_MB, f"{name}: peak RSS {run.peak_rss_mb:.0f} MB"
     assert not (tmp / "r.yaml").exists()
+
+
+def test_special_outputs_are_left_alone(tmp: Path) -> None:
+    fifo, link = _fifo(tmp), _symlink(tmp)
+    for out in (fifo, link):
+        assert_one_line_error(run_cli("calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", out, cwd=tmp))
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and link.is_symlink()
+    assert (tmp / "real.yaml").read_text() == "old: 1\n"
+
+
+def test_unwritable_output_keeps_the_result(tmp: Path) -> None:
+    """The output fails after the optimisation (/proc takes no new files, even as root): the
+    result goes to a named fallback file, the line says where, exit 2."""
+    from l2e_studio.io.cameras import load_seed
+
+    target = Path("/proc/l2e_studio_result.yaml")
+    run = run_cli("calibrate", "--scenes", tmp / "scenes", "--quiet", "--single-stage", "--out", target, cwd=tmp)
+    line = assert_one_line_error(run, str(target), "cannot write the result", "saved to")
+    saved = Path(line.rsplit("saved to ", 1)[1])
+    assert saved.parent == tmp and saved.name.startswith("l2e_studio_result.unsaved-") and saved.suffix == ".yaml"
+    assert load_seed(saved).error_to(load_seed(tmp / "scenes" / "camera.yaml"))[0] < 5  # a real result
+    assert "T_cam_lidar" in yaml.safe_load(saved.read_text())

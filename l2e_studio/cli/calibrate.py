@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from .outputs import check_output_file, save_fallback
 
 NAME = "calibrate"
 HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder by MI maximisation (headless)."
@@ -42,9 +43,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
+    from ..atomic import atomic_write_bytes
     from ..calibrate import calibrate, stack_scenes
     from ..evaluate import assess
-    from ..export import write_result
+    from ..export import result_bytes
     from ..samples import sample_scenes_dir
     from ..scenes import load_scene_folder
 
@@ -54,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     folder = args.scenes or sample_scenes_dir()
     for path, what in ((args.seed, "seed file"), (args.camera, "camera file")):
         if path is not None and not path.is_file():
-            raise InputError(path, f"{what} does not exist")
+            raise InputError(path, f"{what} does not exist" if not path.exists() else f"{what} is not a regular file")
+    check_output_file(args.out)
 
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("loading scenes", total=None)
@@ -88,10 +91,15 @@ def run(args: argparse.Namespace) -> int:
         quality = report.to_dict()
         for line in report.warnings:
             print(f"warning: {line}", file=sys.stderr)
-    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root, quality)
     console = Console()
     if not args.quiet:
         console.print(_summary(result, scene_set.seed))
+    data = result_bytes(args.out, result, scene_set.camera, scene_set.root, quality)
+    try:
+        out, backup = args.out, atomic_write_bytes(args.out, data, keep_existing=True)
+    except OSError as exc:
+        where = save_fallback(args.out, data)
+        raise InputError(args.out, f"cannot write the result ({exc.strerror or exc}); it was saved to {where}") from None
     console.print(f"result written to {out}" + (f" (previous file kept as {backup})" if backup else ""), highlight=False)
     console.print(
         f"{len(scene_set.scenes)} scenes, {stack.n_points} points; load {t_loaded - t_start:.2f} s, "

@@ -33,6 +33,7 @@ A file with no intensity gets a constant 0 intensity (the MI will be meaningless
 
 from __future__ import annotations
 
+import io
 import re
 import warnings
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
 
@@ -98,8 +100,9 @@ def write_lidar_txt(path: str | Path, points: np.ndarray, intensity: np.ndarray)
     intensity = np.asarray(intensity, dtype=np.float64).reshape(-1)
     if intensity.shape[0] != points.shape[0]:
         raise ValueError(f"{points.shape[0]} points but {intensity.shape[0]} intensities")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path, np.column_stack([points, intensity]), fmt=["%.6f", "%.6f", "%.6f", "%.3f"], delimiter=",")
+    buf = io.BytesIO()
+    np.savetxt(buf, np.column_stack([points, intensity]), fmt=["%.6f", "%.6f", "%.6f", "%.3f"], delimiter=",")
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
