@@ -14,6 +14,7 @@ import stat
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -221,13 +222,92 @@ OUTPUT_CASES = {
     "out-parent-is-file": (_out_case(_file_parent), ["is a file"]),
 }
 
-ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES}
+def _scene_case(damage: Callable[[Path], Path], *extra: str) -> Callable[[Path], list]:
+    """Damage every scene of the copy the same way; ``damage`` returns the path the line must name."""
+    def build(tmp: Path) -> list:
+        named = damage(tmp / "scenes")
+        return ["calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", tmp / "r.yaml", *extra], named
+    return build
+
+
+def _maps(folder: Path, value: int) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        cv2.imwrite(str(f), np.full((TINY.height, TINY.width), value, np.uint8))
+    return folder / "event" / "scene_000.png"
+
+
+def _intensities(folder: Path, value: float) -> Path:
+    for f in sorted((folder / "lidar").glob("*.txt")):
+        table = np.loadtxt(f, delimiter=",")
+        table[:, 3] = value
+        np.savetxt(f, table, delimiter=",", fmt="%.4f")
+    return folder / "lidar" / "scene_000.txt"
+
+
+def _kitti(folder: Path, data: Callable[[int], bytes]) -> Path:
+    for i, f in enumerate(sorted((folder / "lidar").glob("*.txt"))):
+        f.unlink()
+        (folder / "lidar" / f"{f.stem}.bin").write_bytes(data(i))
+    return folder / "lidar" / "scene_000.bin"
+
+
+def _seed_file(folder: Path, ext) -> Path:
+    f = folder.parent / "seed.yaml"
+    f.write_text(yaml.safe_dump({"translation": ext.translation.tolist(), "rotvec": ext.rotvec.tolist()}))
+    return f
+
+
+def _far_seed(folder: Path) -> Path:
+    from l2e_studio.synth import read_truth
+
+    truth = read_truth(folder / "truth.yaml")
+    return _seed_file(folder, truth.perturbed([100.0, 0, 0], [0, 0, 0]))  # 100 m sideways
+
+
+def _behind_seed(folder: Path) -> Path:
+    from l2e_studio.geometry import Extrinsic
+    from l2e_studio.synth import read_truth
+
+    truth = read_truth(folder / "truth.yaml")
+    return _seed_file(folder, Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth))
+
+
+def _twin_scans(folder: Path) -> Path:
+    for f in sorted((folder / "lidar").glob("*.txt")):
+        shutil.copy(f, f.with_suffix(".csv"))
+    return folder / "lidar" / "scene_000.csv"
+
+
+def _twin_maps(folder: Path) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        np.save(f.with_suffix(".npy"), cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.float32))
+    return folder / "event" / "scene_000.npy"
+
+
+RNG = np.random.default_rng(1)
+SCENE_CASES = {
+    "maps-all-zero": (_scene_case(lambda d: _maps(d, 0)), ["constant"]),
+    "maps-constant": (_scene_case(lambda d: _maps(d, 40)), ["constant"]),
+    "intensities-all-zero": (_scene_case(lambda d: _intensities(d, 0.0)), ["intensities are equal"]),
+    "intensities-constant": (_scene_case(lambda d: _intensities(d, 77.0)), ["intensities are equal"]),
+    "kitti-random-bytes": (_scene_case(lambda d: _kitti(d, lambda i: RNG.bytes(16 * 5000))), ["not a float32"]),
+    "kitti-size-not-16": (_scene_case(lambda d: _kitti(d, lambda i: RNG.bytes(16 * 5000 + 7))), ["multiple of 16"]),
+    "kitti-all-nan": (_scene_case(lambda d: _kitti(d, lambda i: np.full((100, 4), np.nan, "<f4").tobytes())),
+                      ["NaN"]),
+    "seed-100-m-off": (_scene_case(lambda d: _far_seed(d), "--seed", "SEED"), ["land in the", "far off"]),
+    "seed-cloud-behind-camera": (_scene_case(lambda d: _behind_seed(d), "--seed", "SEED"), ["behind the camera"]),
+    "two-scans-one-stem": (_scene_case(_twin_scans), ["share the stem"]),
+    "two-maps-one-stem": (_scene_case(_twin_maps), ["share the stem"]),
+}
+
+ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
 def test_bad_input_is_one_line_exit_2(name: str, tmp: Path) -> None:
     build, fragments = ALL_CASES[name]
     args, named = build(tmp)
+    args = [named if a == "SEED" else a for a in args]
     run = run_cli(*args, cwd=tmp)
     assert_one_line_error(run, str(named), *fragments)
     assert run.peak_rss_mb < RSS_BOUND_MB, f"{name}: peak RSS {run.peak_rss_mb:.0f} MB"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -45,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..atomic import atomic_write_bytes
     from ..calibrate import calibrate, stack_scenes
+    from ..checks import check_seed_coverage
     from ..evaluate import assess
     from ..export import result_bytes
     from ..samples import sample_scenes_dir
@@ -72,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     t_loaded = time.perf_counter()
 
     seed = scene_set.seed
+    check_seed_coverage([sc.points for sc in scene_set.scenes], scene_set.camera, seed, scene_set.seed_source)
     stack = stack_scenes(scene_set.scenes, scene_set.camera, seed, settings)
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("optimising", total=1.0)
@@ -83,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
 
+    if not (math.isfinite(result.mi_result) and math.isfinite(result.mi_seed)):
+        raise InputError(None, f"the optimiser failed ({result.message or 'non-finite MI'}); no result was written")
     quality = None
     if args.check:
         with _progress(args.quiet, err) as prog:
