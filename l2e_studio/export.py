@@ -120,8 +120,19 @@ def write_result(
     """Write the result file atomically. Returns ``(path, backup)``: an existing file at
     ``path`` is first kept under a timestamped backup name, never overwritten."""
     path = Path(path)
-    data = dumps(result_to_dict(result, camera, scenes_dir, quality, verdict), path)
-    return path, atomic_write_bytes(path, data, keep_existing=True)
+    return path, atomic_write_bytes(path, result_bytes(path, result, camera, scenes_dir, quality, verdict), keep_existing=True)
+
+
+def result_bytes(
+    path: str | Path,
+    result: CalibrationResult,
+    camera: CameraModel | None = None,
+    scenes_dir: str | Path | None = None,
+    quality: dict | None = None,
+    verdict: Verdict | None = None,
+) -> bytes:
+    """The result file's bytes, in the format ``path``'s name asks for."""
+    return dumps(result_to_dict(result, camera, scenes_dir, quality, verdict), path)
 
 
 def _round(a) -> list:

@@ -78,14 +78,17 @@ class SceneSet:
         return [s.name for s in self.scenes]
 
 
-def find_scene_files(folder: Path) -> tuple[dict[str, tuple[Path, Path]], list[str]]:
-    """Pair map files with lidar files by stem: ``({stem: (map, lidar)}, unpaired messages)``."""
-    maps = _by_stem(_first_dir(folder, MAP_DIRS), MAP_SUFFIXES + EVENT_SUFFIXES)
-    scans = _by_stem(_first_dir(folder, LIDAR_DIRS), LIDAR_SUFFIXES)
-    pairs = {stem: (maps[stem], scans[stem]) for stem in sorted(maps.keys() & scans.keys())}
+def find_scene_files(folder: Path) -> tuple[dict[str, tuple[Path, Path]], list[str], dict[str, str]]:
+    """Pair map files with lidar files by stem: ``({stem: (map, lidar)}, unpaired messages,
+    {stem: problem})``; a stem with two map files or two scans is ambiguous, never paired."""
+    maps, map_twins = _by_stem(_first_dir(folder, MAP_DIRS), MAP_SUFFIXES + EVENT_SUFFIXES)
+    scans, scan_twins = _by_stem(_first_dir(folder, LIDAR_DIRS), LIDAR_SUFFIXES)
+    ambiguous = {stem: f"{' and '.join(str(p) for p in paths)} share the stem {stem!r}; keep one"
+                 for stem, paths in {**map_twins, **scan_twins}.items()}
+    pairs = {stem: (maps[stem], scans[stem]) for stem in sorted(maps.keys() & scans.keys()) if stem not in ambiguous}
     unpaired = [f"{maps[s]}: no lidar scan with stem {s!r}" for s in sorted(maps.keys() - scans.keys())]
     unpaired += [f"{scans[s]}: no event map with stem {s!r}" for s in sorted(scans.keys() - maps.keys())]
-    return pairs, unpaired
+    return pairs, unpaired, {s: ambiguous[s] for s in sorted(ambiguous) if s in maps and s in scans}
 
 
 def load_scene_folder(
@@ -106,7 +109,10 @@ def load_scene_folder(
     root = Path(folder)
     if not root.is_dir():
         raise InputError(root, "scene folder does not exist" if not root.exists() else "not a folder")
-    pairs, unpaired = find_scene_files(root)
+    pairs, unpaired, ambiguous = find_scene_files(root)
+    if not pairs and ambiguous:
+        stem, problem = next(iter(ambiguous.items()))
+        raise InputError(root, f"no unambiguous scene: {problem}")
     if not pairs:
         raise InputError(root, f"no scene found: expected {'|'.join(MAP_DIRS)}/<stem>.<map> paired with "
                                f"{'|'.join(LIDAR_DIRS)}/<stem>.<scan>")
@@ -121,7 +127,7 @@ def load_scene_folder(
 
     camera: CameraModel | None = rig.camera() if rig.width and rig.height else None
     scenes: list[Scene] = []
-    failures: list[SceneFailure] = []
+    failures = [SceneFailure(stem, problem) for stem, problem in ambiguous.items()]
     for i, (stem, (map_path, lidar_path)) in enumerate(pairs.items()):
         if on_scene:
             on_scene(i, len(pairs), stem)
@@ -158,7 +164,19 @@ def load_scene(
     w, h = (camera.width, camera.height) if camera else (None, None)
     event_map, kind = load_map(map_path, width=w, height=h, kind=map_kind)
     points, intensity = _load_scan_cached(lidar_path, cache_root)
+    check_informative(map_path, event_map, lidar_path, intensity)
     return Scene(name, points, intensity, event_map, kind, lidar_path, map_path)
+
+
+def check_informative(map_path: Path, event_map: np.ndarray, lidar_path: Path, intensity: np.ndarray) -> None:
+    """Refuse a scene whose map or intensities are constant: its MI is zero wherever the lidar
+    projects, so it cannot inform a calibration (and pooled with others it only dilutes them)."""
+    lo, hi = float(np.min(event_map)), float(np.max(event_map))
+    if lo == hi:
+        raise InputError(map_path, f"the map is constant (every pixel is {lo:g}); it cannot inform a calibration")
+    if intensity.size and float(np.min(intensity)) == float(np.max(intensity)):
+        raise InputError(lidar_path, f"all {intensity.size} intensities are equal ({float(intensity[0]):g}); "
+                                     "the MI needs varying lidar intensities")
 
 
 # --- internals ------------------------------------------------------------------------------
@@ -171,20 +189,25 @@ def _first_dir(root: Path, names: tuple[str, ...]) -> Path | None:
     return None
 
 
-def _by_stem(folder: Path | None, suffixes: tuple[str, ...]) -> dict[str, Path]:
+def _by_stem(folder: Path | None, suffixes: tuple[str, ...]) -> tuple[dict[str, Path], dict[str, list[Path]]]:
+    """``({stem: file}, {stem: [files]})``: the second holds stems that more than one file claims."""
     if folder is None:
-        return {}
+        return {}, {}
     ordered = sorted(suffixes, key=len, reverse=True)  # ".pcd.bin" before ".bin"
     out: dict[str, Path] = {}
+    twins: dict[str, list[Path]] = {}
     for path in sorted(folder.iterdir()):
         if not path.is_file() or path.name.startswith("."):
             continue
         lower = path.name.lower()
         for suffix in ordered:
             if lower.endswith(suffix) and len(lower) > len(suffix):
-                out.setdefault(path.name[: -len(suffix)], path)
+                stem = path.name[: -len(suffix)]
+                if stem in out:
+                    twins.setdefault(stem, [out[stem]]).append(path)
+                out.setdefault(stem, path)
                 break
-    return out
+    return out, twins
 
 
 def _find_rig(root: Path) -> Path:

@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from .atomic import atomic_write_bytes
 from .camera import CameraModel
 from .errors import InputError
 from .geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
@@ -247,8 +248,10 @@ def write_dataset(
     for i in range(config.n_scenes):
         points, intensity, event_map = make_scene(config, i, truth, camera)
         stem = scene_stem(i)
-        if not cv2.imwrite(str(out / "event" / f"{stem}.png"), event_map):
-            raise InputError(out / "event" / f"{stem}.png", "could not write the PNG")
+        ok, png = cv2.imencode(".png", event_map)
+        if not ok:
+            raise InputError(out / "event" / f"{stem}.png", "could not encode the PNG")
+        atomic_write_bytes(out / "event" / f"{stem}.png", png.tobytes())
         write_points_txt(out / "lidar" / f"{stem}.txt", points, intensity)
         if on_scene:
             on_scene(i + 1, config.n_scenes)
@@ -273,7 +276,7 @@ def write_points_txt(path: Path, points: np.ndarray, intensity: np.ndarray) -> N
     table[:, :3] = points
     table[:, 3] = np.round(intensity)
     text = ("%.4f,%.4f,%.4f,%d\n" * n) % tuple(table.ravel().tolist())
-    Path(path).write_text(text)
+    atomic_write_bytes(path, text.encode())
 
 
 def write_rig_files(out: Path, camera: CameraModel, seed: Extrinsic, truth: Extrinsic, config: SynthConfig) -> None:
@@ -291,13 +294,13 @@ def write_rig_files(out: Path, camera: CameraModel, seed: Extrinsic, truth: Extr
             **dict(zip(("rx", "ry", "rz"), (float(a) for a in seed.rpy(degrees=True)))),
         }
     }
-    (out / "config" / "config.json").write_text(json.dumps(cfg, indent=2) + "\n")
+    atomic_write_bytes(out / "config" / "config.json", (json.dumps(cfg, indent=2) + "\n").encode())
     cam_yaml = {
         "camera": {"model": camera.model, "width": camera.width, "height": camera.height, "K": K, "D": D},
         "seed": {"translation": seed.translation.tolist(), "rotvec": seed.rotvec.tolist()},
     }
     header = "# Synthetic rig written by `l2e-studio synth`; seed = truth perturbed (see truth.yaml).\n"
-    (out / "camera.yaml").write_text(header + yaml.safe_dump(cam_yaml, sort_keys=False, default_flow_style=None))
+    atomic_write_bytes(out / "camera.yaml", (header + yaml.safe_dump(cam_yaml, sort_keys=False, default_flow_style=None)).encode())
     err_deg, err_m = seed.error_to(truth)
     truth_yaml = {
         "T_cam_lidar": truth.matrix.tolist(),
@@ -308,7 +311,7 @@ def write_rig_files(out: Path, camera: CameraModel, seed: Extrinsic, truth: Extr
         "generator": asdict(config),
     }
     header = "# Ground truth T_cam_lidar (X_cam = R X_lidar + t) of this synthetic dataset.\n"
-    (out / "truth.yaml").write_text(header + yaml.safe_dump(truth_yaml, sort_keys=False, default_flow_style=None))
+    atomic_write_bytes(out / "truth.yaml", (header + yaml.safe_dump(truth_yaml, sort_keys=False, default_flow_style=None)).encode())
 
 
 def read_truth(path: str | Path) -> Extrinsic:

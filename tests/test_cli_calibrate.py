@@ -124,6 +124,6 @@ def test_unpaired_files_are_reported(scene_dir_copy, tmp_path):
 
 def test_bad_settings_and_missing_seed_file(small_synth_dir, tmp_path):
     assert_one_line_error(run_cli("calibrate", "--scenes", small_synth_dir, "--bound-deg", "0", "--out", tmp_path / "r.yaml"),
-                          "bounds must be positive")
+                          "--bound-deg", "(0, 90]")
     assert_one_line_error(run_cli("calibrate", "--scenes", small_synth_dir, "--seed", tmp_path / "none.yaml",
                                   "--out", tmp_path / "r.yaml"), "none.yaml", "does not exist")

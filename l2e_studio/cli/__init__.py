@@ -54,12 +54,12 @@ def _quiet_opencv() -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    _quiet_opencv()
     parser = build_parser()
     known = set(parser._subparsers._group_actions[0].choices)  # type: ignore[union-attr]
     if not argv or (argv[0] not in known and argv[0] not in ("-h", "--help")):
         argv = [DEFAULT_COMMAND, *argv]
     args = parser.parse_args(argv)
+    _quiet_opencv()  # after parsing: --help imports neither OpenCV nor numpy
     try:
         return int(args._run(args) or 0)
     except InputError as exc:

@@ -3,26 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
 
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
-
-from ..calibrate import METHODS, CalibrationSettings, calibrate, stack_scenes
 from ..scoring import OBJECTIVES
-from ..verdict import ON_UNTRUSTED, judge
 from ..errors import InputError
-from ..evaluate import assess
-from ..export import write_result
-from ..geometry import Extrinsic
-from ..samples import sample_scenes_dir
-from ..scenes import load_scene_folder
+from .outputs import check_output_file, save_fallback
 
 NAME = "calibrate"
 HELP = "Calibrate the lidar-to-camera extrinsic of a scene folder (headless), with a verdict on the result."
+
+#: The engine's optimisers and defaults, written out so that ``--help`` needs no numpy/scipy import
+#: (tests/test_cli_inputs.py checks them against :mod:`l2e_studio.calibrate`).
+METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
+ON_UNTRUSTED = ("keep-seed", "mark")  # l2e_studio.verdict.ON_UNTRUSTED
+DEFAULTS = {"translation_bound": 0.2, "rotation_bound_deg": 10.0, "sigma": 2.0}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,11 +29,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("l2e_result.yaml"),
                    help="result file, YAML or .json (default: ./l2e_result.yaml; an existing file is kept as a backup)")
     p.add_argument("--method", choices=METHODS, default="SLSQP", help="optimiser (default: SLSQP)")
-    p.add_argument("--bound-m", type=float, default=CalibrationSettings.translation_bound,
+    p.add_argument("--bound-m", type=float, default=DEFAULTS["translation_bound"],
                    help="translation bound per axis around the seed, metres (default: %(default)s)")
-    p.add_argument("--bound-deg", type=float, default=CalibrationSettings.rotation_bound_deg,
+    p.add_argument("--bound-deg", type=float, default=DEFAULTS["rotation_bound_deg"],
                    help="rotation bound per axis around the seed, degrees (default: %(default)s)")
-    p.add_argument("--sigma", type=float, default=CalibrationSettings.sigma,
+    p.add_argument("--sigma", type=float, default=DEFAULTS["sigma"],
                    help="event-map smoothing of the final stage, pixels (default: %(default)s)")
     p.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
                    help="score to climb: mi (the paper's, for event maps), edges (lidar edges on image edges, for "
@@ -55,13 +52,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from ..atomic import atomic_write_bytes
+    from ..calibrate import calibrate, stack_scenes
+    from ..checks import check_seed_coverage
+    from ..evaluate import assess
+    from ..export import result_bytes
+    from ..samples import sample_scenes_dir
+    from ..scenes import load_scene_folder
+    from ..verdict import judge
+
     err = Console(stderr=True)
     t_start = time.perf_counter()
     settings = _settings(args)
     folder = args.scenes or sample_scenes_dir()
     for path, what in ((args.seed, "seed file"), (args.camera, "camera file")):
         if path is not None and not path.is_file():
-            raise InputError(path, f"{what} does not exist")
+            raise InputError(path, f"{what} does not exist" if not path.exists() else f"{what} is not a regular file")
+    check_output_file(args.out)
 
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("loading scenes", total=None)
@@ -79,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     t_loaded = time.perf_counter()
 
     seed = scene_set.seed
+    check_seed_coverage([sc.points for sc in scene_set.scenes], scene_set.camera, seed, scene_set.seed_source)
     stack = stack_scenes(scene_set.scenes, scene_set.camera, seed, settings)
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("optimising", total=1.0)
@@ -90,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
 
+    if not (math.isfinite(result.score_result) and math.isfinite(result.score_seed)):
+        raise InputError(None, f"the optimiser failed ({result.message or 'non-finite score'}); no result was written")
     verdict = None
     if not args.no_verdict:
         with _progress(args.quiet, err) as prog:
@@ -104,12 +116,17 @@ def run(args: argparse.Namespace) -> int:
         quality = report.to_dict()
         for line in report.warnings:
             print(f"warning: {line}", file=sys.stderr)
-    out, backup = write_result(args.out, result, scene_set.camera, scene_set.root, quality, verdict)
     console = Console()
     if not args.quiet:
         console.print(_summary(result, scene_set.seed))
     if verdict is not None:
         console.print(f"verdict: {verdict.summary()}", highlight=False)
+    data = result_bytes(args.out, result, scene_set.camera, scene_set.root, quality, verdict)
+    try:
+        out, backup = args.out, atomic_write_bytes(args.out, data, keep_existing=True)
+    except OSError as exc:
+        where = save_fallback(args.out, data)
+        raise InputError(args.out, f"cannot write the result ({exc.strerror or exc}); it was saved to {where}") from None
     console.print(f"result written to {out}" + (f" (previous file kept as {backup})" if backup else ""), highlight=False)
     console.print(
         f"{len(scene_set.scenes)} scenes, {stack.n_points} points; load {t_loaded - t_start:.2f} s, "
@@ -121,7 +138,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _settings(args: argparse.Namespace) -> CalibrationSettings:
+def _settings(args: argparse.Namespace):
+    """The engine's settings; bounds and sigma outside a sane range (or NaN) are refused here."""
+    from ..calibrate import CalibrationSettings
+    from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M, check_range
+
+    for option, value, low, high, low_ok in (
+        ("--bound-m", args.bound_m, 0.0, MAX_TRANSLATION_BOUND_M, True),
+        ("--bound-deg", args.bound_deg, 0.0, MAX_ROTATION_BOUND_DEG, False),
+        ("--sigma", args.sigma, 0.0, MAX_SIGMA_PX, True),
+    ):
+        if not check_range(value, low, high, low_ok):
+            raise InputError(None, f"{option} must be a finite number in {'[' if low_ok else '('}{low:g}, {high:g}], "
+                                   f"got {value:g}")
     try:
         return CalibrationSettings(
             method=args.method,
@@ -136,14 +165,18 @@ def _settings(args: argparse.Namespace) -> CalibrationSettings:
         raise InputError(None, str(exc)) from None
 
 
-def _progress(quiet: bool, console: Console) -> Progress:
+def _progress(quiet: bool, console):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
     return Progress(
         TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
         console=console, disable=quiet or not console.is_terminal, transient=False,
     )
 
 
-def _summary(result, seed: Extrinsic) -> Table:
+def _summary(result, seed):
+    from rich.table import Table
+
     table = Table(title=f"L2E calibration ({result.objective} score)", show_lines=False)
     table.add_column("scene")
     table.add_column("score at seed", justify="right")

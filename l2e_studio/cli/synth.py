@@ -5,20 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-from ..synth import SAMPLE_CONFIG, SynthConfig, check_out_dir, config_with, make_rig, write_dataset
 
 NAME = "synth"
 HELP = "Write synthetic scenes (lidar scans + event maps) with a known true extrinsic (truth.yaml)."
 
-PRESETS = {"full": SynthConfig(), "sample": SAMPLE_CONFIG}
+#: full: :class:`~l2e_studio.synth.SynthConfig`'s defaults; sample: ``SAMPLE_CONFIG`` (imported when run).
+PRESETS = ("full", "sample")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder (must be empty or new, unless --force)")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="full",
+    p.add_argument("--preset", choices=PRESETS, default="full",
                    help="full: the paper's sensors, 40 scenes (default); sample: 6 small scenes as in assets/")
     p.add_argument("--scenes", type=int, help="number of scenes (full: 40)")
     p.add_argument("--width", type=int, help="event-map width in pixels (full: 1280)")
@@ -32,9 +29,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
 
-def config_from_args(args: argparse.Namespace) -> SynthConfig:
+def config_from_args(args: argparse.Namespace):
     """The :class:`SynthConfig` the command line asks for (raises ValueError when out of range)."""
-    base = PRESETS[args.preset]
+    from ..synth import SAMPLE_CONFIG, SynthConfig, config_with
+
+    base = SAMPLE_CONFIG if args.preset == "sample" else SynthConfig()
     height = args.height
     if args.width is not None and height is None:
         height = max(16, round(args.width * 9 / 16))
@@ -46,6 +45,11 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    from ..synth import check_out_dir, make_rig, write_dataset
+
     err = Console(stderr=True)
     try:
         config = config_from_args(args)

@@ -25,7 +25,6 @@ mapping with ``translation`` + ``rotvec`` / ``quaternion_xyzw`` / ``rpy_deg`` / 
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +36,8 @@ import yaml
 from ..camera import CameraModel
 from ..errors import InputError
 from ..geometry import Extrinsic
+from ..limits import MAX_IMAGE_SIDE, ROTATION_TOLERANCE
+from .safe_load import MAX_DOCUMENT_BYTES, parse_json, parse_yaml, read_text_capped
 
 #: ROS / OpenCV / Kalibr distortion model names -> ours.
 MODEL_NAMES = {
@@ -65,8 +66,14 @@ class RigFile:
         h = height if height is not None else self.height
         if w is None or h is None:
             raise InputError(self.source, "the image size is not in this file; it must come from the maps")
+        w, h = int(w), int(h)
+        if not (0 < w <= MAX_IMAGE_SIDE and 0 < h <= MAX_IMAGE_SIDE):
+            raise InputError(self.source, f"image size {w}x{h} is outside 1..{MAX_IMAGE_SIDE} pixels per side")
+        cx, cy = self.K[0, 2], self.K[1, 2]
+        if not (0 <= cx <= w and 0 <= cy <= h):
+            raise InputError(self.source, f"the principal point ({cx:g}, {cy:g}) lies outside the {w}x{h} image")
         try:
-            return CameraModel(self.K, int(w), int(h), self.D, self.model)
+            return CameraModel(self.K, w, h, self.D, self.model)
         except ValueError as exc:
             raise InputError(self.source, str(exc)) from exc
 
@@ -94,6 +101,8 @@ def load_seed(path: str | Path) -> Extrinsic:
     if path.suffix.lower() == ".npy":
         if not path.is_file():
             raise InputError(path, "seed file not found")
+        if path.stat().st_size > MAX_DOCUMENT_BYTES:
+            raise InputError(path, f"a seed matrix file is at most {MAX_DOCUMENT_BYTES // 2**20} MiB")
         try:
             return _extrinsic_from_matrix(path, np.load(path, allow_pickle=False))
         except (ValueError, OSError) as exc:
@@ -132,23 +141,15 @@ def load_seed(path: str | Path) -> Extrinsic:
 
 def _read_document(path: Path) -> Any:
     """Parse JSON / YAML / OpenCV FileStorage; return the raw text when it is none of those."""
-    if not path.is_file():
-        raise InputError(path, "file not found")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file") from None
+    text = read_text_capped(path)
     if not text.strip():
         raise InputError(path, "the file is empty")
     if text.lstrip().startswith("%YAML") or "opencv-matrix" in text or text.lstrip().startswith("<?xml"):
         return _read_opencv_storage(path)
     if path.suffix.lower() == ".json":
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(path, f"invalid JSON ({exc.msg} at line {exc.lineno})") from None
+        return parse_json(path, text)
     try:
-        doc = yaml.safe_load(text)
+        doc = parse_yaml(path, text)
     except yaml.YAMLError as exc:
         if re.search(r"^\s*K\s*:", text, re.MULTILINE):
             return text
@@ -221,8 +222,17 @@ def _vector(path: Path, value: Any, what: str, sizes: tuple[int, ...] | None = N
 
 
 def _check_K(path: Path, K: np.ndarray) -> np.ndarray:
-    if K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise InputError(path, f"K has non-positive focal lengths fx={K[0, 0]}, fy={K[1, 1]}")
+    """A physical pinhole K: positive focal lengths of one order, ``[0, 0, 1]`` last row, no shear below."""
+    fx, fy = K[0, 0], K[1, 1]
+    if fx <= 0 or fy <= 0:
+        raise InputError(path, f"K has non-positive focal lengths fx={fx}, fy={fy}")
+    if not np.allclose(K[2], [0, 0, 1], atol=1e-9) or abs(K[1, 0]) > 1e-9:
+        raise InputError(path, f"K is not a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] "
+                               f"(rows 2-3 are {K[1].tolist()}, {K[2].tolist()})")
+    if max(fx, fy) / min(fx, fy) > 10 or abs(K[0, 1]) > 0.1 * fx:
+        raise InputError(path, f"K is not physical: fx={fx:g}, fy={fy:g}, skew={K[0, 1]:g}")
+    if not (0 < max(fx, fy) < 1e6):
+        raise InputError(path, f"K has an absurd focal length ({max(fx, fy):g} px)")
     return K
 
 
@@ -249,21 +259,48 @@ def _model(path: Path, name: Any) -> str:
     return MODEL_NAMES[key]
 
 
-def _size(value: Any) -> int | None:
+def _size(path: Path, value: Any, what: str) -> int | None:
+    """An image side in pixels, or None when absent; anything else non-numeric or absurd is an error."""
     if value is None:
         return None
-    v = int(round(float(value)))
-    return v if v > 0 else None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(path, f"{what} must be a number of pixels, got {value!r}") from None
+    if v == 0:  # camera_info's "unknown"
+        return None
+    if not np.isfinite(v) or v != round(v) or not 0 < v <= MAX_IMAGE_SIDE:
+        raise InputError(path, f"{what} must be a whole number of pixels in 1..{MAX_IMAGE_SIDE}, got {value!r}")
+    return int(v)
 
 
 def _extrinsic_from_matrix(path: Path, value: Any) -> Extrinsic:
-    T = np.array(value, dtype=np.float64) if not isinstance(value, dict) else np.array(value.get("data"), dtype=np.float64)
+    """A 4x4 or 3x4 ``T_cam_lidar``; the rotation block must be a rotation within tolerance
+    (a sheared or scaled matrix is refused, not silently orthonormalised)."""
+    if isinstance(value, dict):
+        value = value.get("data")
+    try:
+        T = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(path, "the transform matrix is not numeric or its rows differ in length") from None
     if T.size == 16:
         T = T.reshape(4, 4)
     elif T.size == 12:
         T = T.reshape(3, 4)
     else:
         raise InputError(path, f"a transform must be 4x4 or 3x4, got {T.size} values")
+    if not np.all(np.isfinite(T)):
+        raise InputError(path, "the transform matrix has NaN or infinite entries")
+    if T.shape == (4, 4) and not np.allclose(T[3], [0, 0, 0, 1], atol=1e-6):
+        raise InputError(path, f"the last row of a 4x4 transform must be [0, 0, 0, 1], got {T[3].tolist()}")
+    R = T[:3, :3]
+    off = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if off > ROTATION_TOLERANCE or abs(det - 1) > ROTATION_TOLERANCE:
+        raise InputError(path, f"the rotation block is not a rotation (max |R^T R - I| = {off:.2g}, "
+                               f"determinant {det:.4g}; tolerance {ROTATION_TOLERANCE:g})")
+    if np.abs(T[:3, 3]).max() > 1000:
+        raise InputError(path, f"the translation {T[:3, 3].tolist()} is over a kilometre; expected metres")
     try:
         return Extrinsic.from_matrix(T)
     except ValueError as exc:
@@ -323,7 +360,7 @@ def _ours(path: Path, doc: dict) -> RigFile:
     K = _check_K(path, _matrix(path, cam["K"], (3, 3), "camera.K"))
     D = _distortion(path, _vector(path, cam.get("D"), "camera.D"), model)
     seed = _seed_from_mapping(path, doc["seed"]) if isinstance(doc.get("seed"), dict) else None
-    return RigFile(K, D, model, _size(cam.get("width")), _size(cam.get("height")), seed, path, "camera.yaml")
+    return RigFile(K, D, model, _size(path, cam.get("width"), "width"), _size(path, cam.get("height"), "height"), seed, path, "camera.yaml")
 
 
 def _is_reference(doc: dict) -> bool:
@@ -347,7 +384,7 @@ def _reference(path: Path, doc: dict) -> RigFile:
         raise InputError(path, "config has no cam.K (3x3 intrinsic matrix)")
     K = _check_K(path, _matrix(path, cam["K"], (3, 3), "cam.K"))
     D = _distortion(path, _vector(path, cam.get("D"), "cam.D"), "radtan")
-    return RigFile(K, D, "radtan", _size(cam.get("width")), _size(cam.get("height")),
+    return RigFile(K, D, "radtan", _size(path, cam.get("width"), "width"), _size(path, cam.get("height"), "height"),
                    _reference_seed(path, cam), path, "reference config.json")
 
 
@@ -362,8 +399,8 @@ def _opencv(path: Path, doc: dict) -> RigFile:
     model = _model(path, doc.get("distortion_model", "fisheye" if doc.get("fisheye") else "radtan"))
     D = _distortion(path, _vector(path, doc[dkey] if dkey else None, dkey or "D"), model)
     seed = _seed_from_mapping(path, doc) if "T_cam_lidar" in doc else None
-    return RigFile(K, D, model, _size(doc.get("image_width", doc.get("width"))),
-                   _size(doc.get("image_height", doc.get("height"))), seed, path, "OpenCV YAML")
+    return RigFile(K, D, model, _size(path, doc.get("image_width", doc.get("width")), "image_width"),
+                   _size(path, doc.get("image_height", doc.get("height")), "image_height"), seed, path, "OpenCV YAML")
 
 
 def _is_ros(doc: dict) -> bool:
@@ -374,7 +411,7 @@ def _ros(path: Path, doc: dict) -> RigFile:
     K = _check_K(path, _matrix(path, doc["camera_matrix"], (3, 3), "camera_matrix"))
     model = _model(path, doc.get("distortion_model", "plumb_bob"))
     D = _distortion(path, _vector(path, doc.get("distortion_coefficients"), "distortion_coefficients"), model)
-    return RigFile(K, D, model, _size(doc.get("image_width")), _size(doc.get("image_height")), None, path,
+    return RigFile(K, D, model, _size(path, doc.get("image_width"), "image_width"), _size(path, doc.get("image_height"), "image_height"), None, path,
                    "ROS camera_info YAML")
 
 
@@ -402,8 +439,10 @@ def _kalibr(path: Path, doc: dict, camera: str | None = None) -> RigFile:
         D = np.append(D, 0.0)
     D = _distortion(path, D, model)
     res = cam.get("resolution") or [None, None]
+    if not isinstance(res, (list, tuple)) or len(res) != 2:
+        raise InputError(path, f"{name}.resolution must be [width, height], got {res!r}")
     seed = _extrinsic_from_matrix(path, cam["T_cam_lidar"]) if "T_cam_lidar" in cam else None
-    return RigFile(K, D, model, _size(res[0]), _size(res[1]), seed, path, "Kalibr camchain YAML")
+    return RigFile(K, D, model, _size(path, res[0], f"{name}.resolution width"), _size(path, res[1], f"{name}.resolution height"), seed, path, "Kalibr camchain YAML")
 
 
 def _opencalib_param(doc: dict) -> dict | None:
@@ -420,7 +459,7 @@ def _opencalib_intrinsic(path: Path, doc: dict) -> RigFile:
     param = _opencalib_param(doc)
     K = _check_K(path, _matrix(path, param["cam_K"], (3, 3), "cam_K"))
     D = _distortion(path, _vector(path, param.get("cam_dist"), "cam_dist"), "radtan")
-    return RigFile(K, D, "radtan", _size(param.get("img_dist_w")), _size(param.get("img_dist_h")), None, path,
+    return RigFile(K, D, "radtan", _size(path, param.get("img_dist_w"), "img_dist_w"), _size(path, param.get("img_dist_h"), "img_dist_h"), None, path,
                    "OpenCalib intrinsic json")
 
 

@@ -33,6 +33,7 @@ A file with no intensity gets a constant 0 intensity (the MI will be meaningless
 
 from __future__ import annotations
 
+import io
 import re
 import warnings
 from dataclasses import dataclass
@@ -40,8 +41,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
+
+#: No lidar measures this far (metres); a binary scan full of such values is not a scan.
+MAX_RANGE_M = 10_000.0
 
 #: File suffixes :func:`load_lidar` reads (``.pcd.bin`` is matched before ``.bin``).
 LIDAR_SUFFIXES: tuple[str, ...] = (".txt", ".csv", ".xyz", ".pcd", ".ply", ".pcd.bin", ".bin", ".npy", ".npz")
@@ -98,8 +103,9 @@ def write_lidar_txt(path: str | Path, points: np.ndarray, intensity: np.ndarray)
     intensity = np.asarray(intensity, dtype=np.float64).reshape(-1)
     if intensity.shape[0] != points.shape[0]:
         raise ValueError(f"{points.shape[0]} points but {intensity.shape[0]} intensities")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path, np.column_stack([points, intensity]), fmt=["%.6f", "%.6f", "%.6f", "%.3f"], delimiter=",")
+    buf = io.BytesIO()
+    np.savetxt(buf, np.column_stack([points, intensity]), fmt=["%.6f", "%.6f", "%.6f", "%.3f"], delimiter=",")
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
@@ -402,6 +408,12 @@ def _read_float_bin(path: Path, ncols: int, names: list[str]) -> dict[str, np.nd
     if size % (4 * ncols):
         raise InputError(path, f"file size {size} is not a multiple of {4 * ncols} bytes ({ncols} float32 per point)")
     table = np.fromfile(path, dtype="<f4").reshape(-1, ncols)
+    xyz = table[:, :3]
+    bad = ~np.all(np.isfinite(xyz) & (np.abs(xyz) < MAX_RANGE_M), axis=1) | ~np.isfinite(table[:, 3])
+    if bad.mean() > 0.01:
+        raise InputError(path, f"{int(bad.sum())} of {len(table)} points are NaN/inf or farther than "
+                               f"{MAX_RANGE_M / 1000:g} km: not a float32 {'x y z intensity' + (' ring' if ncols == 5 else '')} "
+                               "scan (random or other data?)")
     return {n: table[:, i] for i, n in enumerate(names)}
 
 

@@ -1,0 +1,109 @@
+"""Reading small structured files (camera, seed, result files) with bounded memory and time.
+
+* a size cap before anything is read (:data:`MAX_DOCUMENT_BYTES`);
+* YAML without alias expansion bombs: an alias may only repeat a scalar, never a list or a
+  mapping (a 634-byte "billion laughs" file otherwise expands to gigabytes downstream);
+* bounded nesting for YAML and JSON (:data:`MAX_DEPTH`), checked before the recursive parsers
+  run, so a 100k-level file is one :class:`InputError`, not a ``RecursionError`` traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import InputError
+
+#: Camera, seed and result files are a few kB; anything this large is not one.
+MAX_DOCUMENT_BYTES = 4 * 1024 * 1024
+#: Deeper than any camera/seed/result layout (they nest 4 levels at most).
+MAX_DEPTH = 64
+
+
+def read_text_capped(path: Path, limit: int = MAX_DOCUMENT_BYTES, what: str = "file") -> str:
+    """The UTF-8 text of ``path``, refusing files larger than ``limit`` bytes before reading them."""
+    if not path.is_file():
+        raise InputError(path, f"{what} not found" if not path.exists() else f"{what} is not a regular file")
+    size = path.stat().st_size
+    if size > limit:
+        raise InputError(path, f"{what} is {size / 2**20:.1f} MiB; a camera or seed file is at most "
+                               f"{limit / 2**20:.0f} MiB")
+    try:
+        with path.open("rb") as fh:
+            data = fh.read(limit + 1)
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror or exc})") from None
+    if len(data) > limit:  # grew while we looked
+        raise InputError(path, f"{what} is larger than {limit / 2**20:.0f} MiB")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(path, "not a UTF-8 text file") from None
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` with a nesting limit and aliases restricted to scalars."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):  # type: ignore[override]
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            node = self.anchors.get(event.anchor)
+            if node is not None and not isinstance(node, yaml.ScalarNode):
+                raise _Refused(f"YAML alias *{event.anchor} repeats a list or mapping (line {event.start_mark.line + 1}); "
+                               "aliases may only repeat single values")
+            return super().compose_node(parent, index)
+        self._depth += 1
+        if self._depth > MAX_DEPTH:
+            raise _Refused(f"nested more than {MAX_DEPTH} levels deep (line {self.peek_event().start_mark.line + 1})")
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+class _Refused(Exception):
+    pass
+
+
+def parse_yaml(path: Path, text: str) -> Any:
+    """``yaml.safe_load`` with the bounds above; :class:`yaml.YAMLError` passes through for the caller."""
+    loader = _BoundedLoader(text)
+    try:
+        return loader.get_single_data()
+    except _Refused as exc:
+        raise InputError(path, str(exc)) from None
+    except RecursionError:  # pragma: no cover - the depth limit comes first
+        raise InputError(path, f"nested more than {MAX_DEPTH} levels deep") from None
+    finally:
+        loader.dispose()
+
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
+
+
+def json_depth(text: str) -> int:
+    """The deepest ``[``/``{`` nesting of JSON ``text`` (strings ignored), without parsing it."""
+    depth = deepest = 0
+    for ch in re.sub(r"[^\[\]{}]", "", _JSON_STRING.sub("", text)):
+        depth += 1 if ch in "[{" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
+def parse_json(path: Path, text: str) -> Any:
+    """``json.loads`` with the nesting bound; malformed JSON is one :class:`InputError` line."""
+    depth = json_depth(text)
+    if depth > MAX_DEPTH:
+        raise InputError(path, f"JSON nested {depth} levels deep; at most {MAX_DEPTH} are accepted")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(path, f"invalid JSON ({exc.msg} at line {exc.lineno})") from None

@@ -1,0 +1,28 @@
+"""Sane ranges for user-supplied numbers, shared by the readers, the CLI and the app.
+
+Outside these ranges an input cannot inform a calibration (or would only exhaust memory), so it
+is refused with one line instead of producing a silent wrong result.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: Image / sensor side, pixels. The largest event sensors are 1280x720; frame cameras used as
+#: stand-ins stay far below this. A header or camera file claiming more is refused.
+MAX_IMAGE_SIDE = 16_384
+#: A rotation block R is accepted when max |R^T R - I| and |det R - 1| are within this.
+ROTATION_TOLERANCE = 1e-3
+#: Translation bound per axis, metres: a lidar-camera rig is at most a few metres across.
+MAX_TRANSLATION_BOUND_M = 5.0
+#: Rotation bound per axis, degrees (the parametrisation is a correction of the seed).
+MAX_ROTATION_BOUND_DEG = 90.0
+#: Final-stage map smoothing, pixels; wider only costs memory (1e6 px asked for 8.7 GiB).
+MAX_SIGMA_PX = 200.0
+
+
+def check_range(value: float, low: float, high: float, low_inclusive: bool = True) -> bool:
+    """``value`` is finite and within ``[low, high]`` (``(low, high]`` when not ``low_inclusive``)."""
+    if not math.isfinite(value):
+        return False
+    return (value >= low if low_inclusive else value > low) and value <= high

@@ -1,0 +1,336 @@
+"""A corpus of bad inputs through the real CLI: each is exit 2, one stderr line naming the file or
+option, no traceback; memory bombs stay under a peak-RSS bound.
+
+Each case builds its input under ``tmp`` (a fresh folder holding ``scenes/``, a tiny valid scene
+folder) and returns the command line and the fragments the error line must contain.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import stat
+from pathlib import Path
+from typing import Callable
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from bad_inputs import assert_one_line_error, run_cli
+from l2e_studio.synth import SynthConfig, config_with, write_dataset
+
+TINY = config_with(SynthConfig(), n_scenes=2, width=320, height=180, points_per_scan=4000, seed=5)
+#: Peak RSS a bad input may cost (the interpreter with numpy, scipy and OpenCV is about 100 MB).
+RSS_BOUND_MB = 400
+
+GOOD_K = [[300.0, 0, 160.0], [0, 300.0, 90.0], [0, 0, 1]]
+SEED = {"translation": [0.0, 0.0, 0.0], "rotvec": [1.2091996, -1.2091996, 1.2091996]}
+
+
+@pytest.fixture(scope="module")
+def tiny_dir(tmp_path_factory) -> Path:
+    return write_dataset(tmp_path_factory.mktemp("tiny") / "scenes", TINY)
+
+
+@pytest.fixture
+def tmp(tiny_dir, tmp_path) -> Path:
+    shutil.copytree(tiny_dir, tmp_path / "scenes", ignore=shutil.ignore_patterns(".l2e_cache"))
+    return tmp_path
+
+
+# --- builders ---------------------------------------------------------------------------------
+
+def _camera_case(text: str | bytes, name: str = "camera.yaml") -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        f = tmp / name
+        f.write_bytes(text if isinstance(text, bytes) else text.encode())
+        return ["calibrate", "--scenes", tmp / "scenes", "--camera", f, "--quiet", "--out", tmp / "r.yaml"], f
+    return build
+
+
+def _seed_case(text: str | bytes, name: str = "seed.yaml") -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        f = tmp / name
+        f.write_bytes(text if isinstance(text, bytes) else text.encode())
+        return ["calibrate", "--scenes", tmp / "scenes", "--seed", f, "--quiet", "--out", tmp / "r.yaml"], f
+    return build
+
+
+def _option_case(*options: str) -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        return ["calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", tmp / "r.yaml", *options], options[0]
+    return build
+
+
+def _ours(**camera) -> str:
+    cam = {"model": "radtan", "width": 320, "height": 180, "K": GOOD_K, "D": [0, 0, 0, 0, 0], **camera}
+    return yaml.safe_dump({"camera": cam, "seed": SEED})
+
+
+def _alias_bomb() -> str:
+    lines = ['a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]']
+    for i in range(1, 9):
+        prev, cur = chr(ord("a") + i - 1), chr(ord("a") + i)
+        lines.append(f"{cur}: &{cur} [" + ",".join([f"*{prev}"] * 9) + "]")
+    lines.append("camera: {K: *i, width: 320, height: 180}")
+    return "\n".join(lines) + "\n"
+
+
+def _matrix_text(m) -> str:
+    return "\n".join(" ".join(str(v) for v in row) for row in m) + "\n"
+
+
+SHEAR = [[1, 0.2, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+REFLECT = [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+
+
+CAMERA_CASES = {
+    "yaml-alias-bomb": (_camera_case(_alias_bomb()), ["alias"]),
+    "yaml-20k-levels": (_camera_case("camera: " + "[" * 20000 + "]" * 20000 + "\n"), ["nested"]),
+    "yaml-20k-block-levels": (_camera_case("".join("  " * i + "a:\n" for i in range(2000)) + "  " * 2000 + "b\n"),
+                              ["nested"]),
+    "json-100k-levels": (_camera_case('{"cam": ' + "[" * 100000 + "]" * 100000 + "}", "config.json"), ["nested"]),
+    "json-100k-objects": (_camera_case('{"a":' * 100000 + "1" + "}" * 100000, "config.json"), ["nested"]),
+    "file-over-size-cap": (_camera_case("# " + "x" * (5 * 2**20) + "\n" + _ours()), ["MiB"]),
+    "width-abc": (_camera_case(_ours(width="abc")), ["width", "abc"]),
+    "width-negative": (_camera_case(_ours(width=-320)), ["width"]),
+    "width-fraction": (_camera_case(_ours(width=320.5)), ["width"]),
+    "width-huge": (_camera_case(_ours(width=10**9)), ["width"]),
+    "height-list": (_camera_case(_ours(height=[180])), ["height"]),
+    "kalibr-one-value-resolution": (_camera_case(yaml.safe_dump({"cam0": {
+        "camera_model": "pinhole", "intrinsics": [300.0, 300.0, 160.0, 90.0], "distortion_model": "radtan",
+        "distortion_coeffs": [0, 0, 0, 0], "resolution": [320]}})), ["resolution"]),
+    "kalibr-string-resolution": (_camera_case(yaml.safe_dump({"cam0": {
+        "camera_model": "pinhole", "intrinsics": [300.0, 300.0, 160.0, 90.0], "distortion_model": "radtan",
+        "distortion_coeffs": [0, 0, 0, 0], "resolution": "320x180"}})), ["resolution"]),
+    "kalibr-text-intrinsics": (_camera_case(yaml.safe_dump({"cam0": {
+        "camera_model": "pinhole", "intrinsics": ["a", "b", "c", "d"], "resolution": [320, 180]}})), ["not numeric"]),
+    "K-zero-focal": (_camera_case(_ours(K=[[0, 0, 160], [0, 300, 90], [0, 0, 1]])), ["focal"]),
+    "K-singular-last-row": (_camera_case(_ours(K=[[300, 0, 160], [0, 300, 90], [0, 0, 0]])), ["pinhole"]),
+    "K-transposed": (_camera_case(_ours(K=[[300, 0, 0], [0, 300, 0], [160, 90, 1]])), ["pinhole"]),
+    "K-aspect-1000": (_camera_case(_ours(K=[[300000, 0, 160], [0, 300, 90], [0, 0, 1]])), ["not physical"]),
+    "K-nan": (_camera_case(_ours(K=[[float("nan"), 0, 160], [0, 300, 90], [0, 0, 1]])), ["NaN"]),
+    "K-ragged": (_camera_case(_ours(K=[[300, 0, 160], [0, 300], [0, 0, 1]])), ["camera.K"]),
+    "K-strings": (_camera_case(_ours(K=[["a", 0, 160], [0, 300, 90], [0, 0, 1]])), ["not numeric"]),
+    "K-principal-point-outside": (_camera_case(_ours(K=[[300, 0, 5000], [0, 300, 90], [0, 0, 1]])),
+                                  ["principal point"]),
+    "D-strings": (_camera_case(_ours(D="abc")), ["camera.D"]),
+    "not-utf8": (_camera_case(b"\xff\xfe\x00camera\x80\x81"), ["UTF-8"]),
+    "empty": (_camera_case(""), ["empty"]),
+    "top-level-list": (_camera_case("- 1\n- 2\n"), ["mapping"]),
+    "invalid-yaml": (_camera_case("camera: {K: [1, 2\n"), ["YAML"]),
+    "invalid-json": (_camera_case('{"cam": [1, 2', "config.json"), ["JSON"]),
+    "unknown-format": (_camera_case("foo: 1\nbar: 2\n"), ["unknown camera file format"]),
+}
+
+SEED_CASES = {
+    "seed-ragged-rows": (_seed_case(json.dumps([[1, 0, 0, 0], [0, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), "seed.json"),
+                         ["rows differ"]),
+    "seed-strings-in-matrix": (_seed_case(yaml.safe_dump({"T_cam_lidar": [["a", 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0],
+                                                                          [0, 0, 0, 1]]})), ["not numeric"]),
+    "seed-sheared": (_seed_case(_matrix_text(SHEAR), "seed.txt"), ["not a rotation"]),
+    "seed-scaled": (_seed_case(_matrix_text(np.diag([2, 2, 2, 1]).tolist()), "seed.txt"), ["not a rotation"]),
+    "seed-reflection": (_seed_case(_matrix_text(REFLECT), "seed.txt"), ["not a rotation"]),
+    "seed-bad-last-row": (_seed_case(_matrix_text([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 1, 1, 1]]),
+                                     "seed.txt"), ["last row"]),
+    "seed-nan": (_seed_case(_matrix_text([[1, 0, 0, "nan"], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), "seed.txt"),
+                 ["NaN"]),
+    "seed-translation-absurd": (_seed_case(_matrix_text([[1, 0, 0, 1e7], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+                                           "seed.txt"), ["kilometre"]),
+    "seed-five-numbers": (_seed_case("1 2 3 4 5\n", "seed.txt"), ["12 or 16"]),
+    "seed-words": (_seed_case("hello world\n", "seed.txt"), ["not a 4x4 matrix"]),
+    "seed-alias-bomb": (_seed_case(_alias_bomb().replace("camera: {K: *i, width: 320, height: 180}",
+                                                         "T_cam_lidar: *i")), ["alias"]),
+    "seed-json-deep": (_seed_case("[" * 100000 + "]" * 100000, "seed.json"), ["nested"]),
+    "seed-translation-2-values": (_seed_case(yaml.safe_dump({"translation": [0, 0], "rotvec": [0, 0, 0]})),
+                                  ["seed translation"]),
+    "seed-rotvec-text": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "rotvec": "up"})), ["seed rotvec"]),
+    "seed-zero-quaternion": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 0]})),
+                             ["seed"]),
+    "seed-no-rotation": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0]})), ["no rotvec"]),
+    "seed-npy-object": (lambda tmp: _npy_seed(tmp, np.array([[1, "a"]], dtype=object)), [".npy"]),
+    "seed-npy-3x3": (lambda tmp: _npy_seed(tmp, np.eye(3)), ["4x4 or 3x4"]),
+    "seed-over-size-cap": (_seed_case("# " + "x" * (5 * 2**20) + "\n" + _matrix_text(np.eye(4).tolist()), "seed.txt"),
+                           ["MiB"]),
+    "seed-missing": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--seed", tmp / "nope.yaml", "--quiet"],
+                                  tmp / "nope.yaml"), ["does not exist"]),
+}
+
+
+def _npy_seed(tmp: Path, arr: np.ndarray):
+    f = tmp / "seed.npy"
+    np.save(f, arr, allow_pickle=True)
+    return ["calibrate", "--scenes", tmp / "scenes", "--seed", f, "--quiet", "--out", tmp / "r.yaml"], f
+
+
+OPTION_CASES = {
+    "bound-m-1e9": (_option_case("--bound-m", "1e9"), ["--bound-m"]),
+    "bound-m-nan": (_option_case("--bound-m", "nan"), ["--bound-m"]),
+    "bound-m-inf": (_option_case("--bound-m", "inf"), ["--bound-m"]),
+    "bound-m-negative": (_option_case("--bound-m", "-0.1"), ["--bound-m"]),
+    "bound-deg-zero": (_option_case("--bound-deg", "0"), ["--bound-deg"]),
+    "bound-deg-1000": (_option_case("--bound-deg", "1000"), ["--bound-deg"]),
+    "bound-deg-nan": (_option_case("--bound-deg", "nan"), ["--bound-deg"]),
+    "sigma-nan": (_option_case("--sigma", "nan"), ["--sigma"]),
+    "sigma-1e6": (_option_case("--sigma", "1e6"), ["--sigma"]),
+    "sigma-inf": (_option_case("--sigma", "inf"), ["--sigma"]),
+    "sigma-negative": (_option_case("--sigma", "-1"), ["--sigma"]),
+}
+
+def _out_case(make: Callable[[Path], Path], *extra: str) -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        out = make(tmp)
+        return ["calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", out, *extra], out
+    return build
+
+
+def _fifo(tmp: Path) -> Path:
+    os.mkfifo(tmp / "fifo.yaml")
+    return tmp / "fifo.yaml"
+
+
+def _device(tmp: Path) -> Path:
+    """A private character device like /dev/null (a regression replaces this one, not the real one)."""
+    try:
+        os.mknod(tmp / "null", stat.S_IFCHR | 0o666, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("creating a device node needs root")
+    return tmp / "null"
+
+
+def _symlink(tmp: Path, target: str = "real.yaml") -> Path:
+    (tmp / "link.yaml").symlink_to(tmp / target)
+    if target == "real.yaml":
+        (tmp / target).write_text("old: 1\n")
+    return tmp / "link.yaml"
+
+
+def _file_parent(tmp: Path) -> Path:
+    (tmp / "afile").write_text("x")
+    return tmp / "afile" / "sub" / "r.yaml"
+
+
+OUTPUT_CASES = {
+    "out-device": (_out_case(lambda tmp: _device(tmp)), ["device"]),
+    "out-fifo": (_out_case(_fifo), ["FIFO"]),
+    "out-folder": (_out_case(lambda tmp: tmp / "scenes"), ["folder"]),
+    "out-symlink": (_out_case(_symlink), ["symbolic link"]),
+    "out-dangling-symlink": (_out_case(lambda tmp: _symlink(tmp, "missing.yaml")), ["symbolic link"]),
+    "out-parent-is-file": (_out_case(_file_parent), ["is a file"]),
+}
+
+def _scene_case(damage: Callable[[Path], Path], *extra: str) -> Callable[[Path], list]:
+    """Damage every scene of the copy the same way; ``damage`` returns the path the line must name."""
+    def build(tmp: Path) -> list:
+        named = damage(tmp / "scenes")
+        return ["calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", tmp / "r.yaml", *extra], named
+    return build
+
+
+def _maps(folder: Path, value: int) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        cv2.imwrite(str(f), np.full((TINY.height, TINY.width), value, np.uint8))
+    return folder / "event" / "scene_000.png"
+
+
+def _intensities(folder: Path, value: float) -> Path:
+    for f in sorted((folder / "lidar").glob("*.txt")):
+        table = np.loadtxt(f, delimiter=",")
+        table[:, 3] = value
+        np.savetxt(f, table, delimiter=",", fmt="%.4f")
+    return folder / "lidar" / "scene_000.txt"
+
+
+def _kitti(folder: Path, data: Callable[[int], bytes]) -> Path:
+    for i, f in enumerate(sorted((folder / "lidar").glob("*.txt"))):
+        f.unlink()
+        (folder / "lidar" / f"{f.stem}.bin").write_bytes(data(i))
+    return folder / "lidar" / "scene_000.bin"
+
+
+def _seed_file(folder: Path, ext) -> Path:
+    f = folder.parent / "seed.yaml"
+    f.write_text(yaml.safe_dump({"translation": ext.translation.tolist(), "rotvec": ext.rotvec.tolist()}))
+    return f
+
+
+def _far_seed(folder: Path) -> Path:
+    from l2e_studio.synth import read_truth
+
+    truth = read_truth(folder / "truth.yaml")
+    return _seed_file(folder, truth.perturbed([100.0, 0, 0], [0, 0, 0]))  # 100 m sideways
+
+
+def _behind_seed(folder: Path) -> Path:
+    from l2e_studio.geometry import Extrinsic
+    from l2e_studio.synth import read_truth
+
+    truth = read_truth(folder / "truth.yaml")
+    return _seed_file(folder, Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth))
+
+
+def _twin_scans(folder: Path) -> Path:
+    for f in sorted((folder / "lidar").glob("*.txt")):
+        shutil.copy(f, f.with_suffix(".csv"))
+    return folder / "lidar" / "scene_000.csv"
+
+
+def _twin_maps(folder: Path) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        np.save(f.with_suffix(".npy"), cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.float32))
+    return folder / "event" / "scene_000.npy"
+
+
+RNG = np.random.default_rng(1)
+SCENE_CASES = {
+    "maps-all-zero": (_scene_case(lambda d: _maps(d, 0)), ["constant"]),
+    "maps-constant": (_scene_case(lambda d: _maps(d, 40)), ["constant"]),
+    "intensities-all-zero": (_scene_case(lambda d: _intensities(d, 0.0)), ["intensities are equal"]),
+    "intensities-constant": (_scene_case(lambda d: _intensities(d, 77.0)), ["intensities are equal"]),
+    "kitti-random-bytes": (_scene_case(lambda d: _kitti(d, lambda i: RNG.bytes(16 * 5000))), ["not a float32"]),
+    "kitti-size-not-16": (_scene_case(lambda d: _kitti(d, lambda i: RNG.bytes(16 * 5000 + 7))), ["multiple of 16"]),
+    "kitti-all-nan": (_scene_case(lambda d: _kitti(d, lambda i: np.full((100, 4), np.nan, "<f4").tobytes())),
+                      ["NaN"]),
+    "seed-100-m-off": (_scene_case(lambda d: _far_seed(d), "--seed", "SEED"), ["land in the", "far off"]),
+    "seed-cloud-behind-camera": (_scene_case(lambda d: _behind_seed(d), "--seed", "SEED"), ["behind the camera"]),
+    "two-scans-one-stem": (_scene_case(_twin_scans), ["share the stem"]),
+    "two-maps-one-stem": (_scene_case(_twin_maps), ["share the stem"]),
+}
+
+ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES}
+
+
+@pytest.mark.parametrize("name", sorted(ALL_CASES))
+def test_bad_input_is_one_line_exit_2(name: str, tmp: Path) -> None:
+    build, fragments = ALL_CASES[name]
+    args, named = build(tmp)
+    args = [named if a == "SEED" else a for a in args]
+    run = run_cli(*args, cwd=tmp)
+    assert_one_line_error(run, str(named), *fragments)
+    assert run.peak_rss_mb < RSS_BOUND_MB, f"{name}: peak RSS {run.peak_rss_mb:.0f} MB"
+    assert not (tmp / "r.yaml").exists()
+
+
+def test_special_outputs_are_left_alone(tmp: Path) -> None:
+    fifo, link = _fifo(tmp), _symlink(tmp)
+    for out in (fifo, link):
+        assert_one_line_error(run_cli("calibrate", "--scenes", tmp / "scenes", "--quiet", "--out", out, cwd=tmp))
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and link.is_symlink()
+    assert (tmp / "real.yaml").read_text() == "old: 1\n"
+
+
+def test_unwritable_output_keeps_the_result(tmp: Path) -> None:
+    """The output fails after the optimisation (/proc takes no new files, even as root): the
+    result goes to a named fallback file, the line says where, exit 2."""
+    from l2e_studio.io.cameras import load_seed
+
+    target = Path("/proc/l2e_studio_result.yaml")
+    run = run_cli("calibrate", "--scenes", tmp / "scenes", "--quiet", "--single-stage", "--out", target, cwd=tmp)
+    line = assert_one_line_error(run, str(target), "cannot write the result", "saved to")
+    saved = Path(line.rsplit("saved to ", 1)[1])
+    assert saved.parent == tmp and saved.name.startswith("l2e_studio_result.unsaved-") and saved.suffix == ".yaml"
+    assert load_seed(saved).error_to(load_seed(tmp / "scenes" / "camera.yaml"))[0] < 5  # a real result
+    assert "T_cam_lidar" in yaml.safe_load(saved.read_text())

@@ -1,0 +1,46 @@
+"""Scene folders: ambiguous stems are reported, uninformative scenes are skipped with the reason."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from l2e_studio.checks import MIN_POINTS_IN_IMAGE, check_seed_coverage, seed_coverage
+from l2e_studio.errors import InputError
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.scenes import find_scene_files, load_scene_folder
+from l2e_studio.synth import read_truth
+
+
+def test_a_stem_with_two_scans_is_a_failure_not_a_silent_choice(scene_dir_copy: Path) -> None:
+    shutil.copy(scene_dir_copy / "lidar" / "scene_001.txt", scene_dir_copy / "lidar" / "scene_001.csv")
+    pairs, _, ambiguous = find_scene_files(scene_dir_copy)
+    assert "scene_001" not in pairs and "scene_000" in pairs
+    assert "scene_001.txt" in ambiguous["scene_001"] and "scene_001.csv" in ambiguous["scene_001"]
+    ss = load_scene_folder(scene_dir_copy, use_cache=False)
+    assert "scene_001" not in ss.names and len(ss.names) == 3
+    assert [f.name for f in ss.failures] == ["scene_001"] and "share the stem" in ss.failures[0].error
+
+
+def test_a_constant_map_among_good_scenes_is_skipped_with_the_reason(scene_dir_copy: Path) -> None:
+    import cv2
+
+    png = scene_dir_copy / "event" / "scene_002.png"
+    cv2.imwrite(str(png), np.zeros_like(cv2.imread(str(png), cv2.IMREAD_UNCHANGED)))
+    ss = load_scene_folder(scene_dir_copy, use_cache=False)
+    assert "scene_002" not in ss.names
+    assert str(png) in ss.failures[0].error and "constant" in ss.failures[0].error
+
+
+def test_seed_coverage_counts_points_in_the_image(small_synth) -> None:
+    scenes, camera, truth = small_synth
+    pts = [s.points for s in scenes]
+    inside, front, total = seed_coverage(pts, camera, truth)
+    assert MIN_POINTS_IN_IMAGE < inside <= front <= total
+    assert check_seed_coverage(pts, camera, truth, "seed.yaml") == inside
+    flipped = Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth)
+    with pytest.raises(InputError, match="seed.yaml: .* behind the camera"):
+        check_seed_coverage(pts, camera, flipped, "seed.yaml")
