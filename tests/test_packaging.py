@@ -65,6 +65,9 @@ def test_cli_defaults_match_the_engine() -> None:
 
     s = engine.CalibrationSettings()
     assert cli.METHODS == engine.METHODS
+    from l2e_studio.verdict import ON_UNTRUSTED
+
+    assert cli.ON_UNTRUSTED == ON_UNTRUSTED
     assert cli.DEFAULTS == {"translation_bound": s.translation_bound, "rotation_bound_deg": s.rotation_bound_deg,
                             "sigma": s.sigma}
 
