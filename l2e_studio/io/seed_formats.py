@@ -24,11 +24,15 @@ _LIDAR_WORDS = ("lidar", "velodyne", "ouster", "livox", "hesai", "laser", "os_se
 
 def seed_from_text(path: Path, text: str) -> Extrinsic | None:
     """The seed in ``text`` if it is a static_transform_publisher line or a URDF joint, else None."""
-    if "static_transform_publisher" in text:
+    if _STATIC_TF.search(text):
         return _static_tf(path, text)
-    if re.search(r"<joint\b", text):
+    if re.search(r"^\s*<joint\b", text, re.MULTILINE):
         return _urdf(path, text)
     return None
+
+
+#: a command line (not, say, a YAML field that quotes one)
+_STATIC_TF = re.compile(r"^\s*(?:rosrun\s+\S+\s+|ros2\s+run\s+\S+\s+)?static_transform_publisher\b", re.MULTILINE)
 
 
 def _oriented(ext: Extrinsic, parent: str, child: str) -> Extrinsic:
@@ -38,7 +42,7 @@ def _oriented(ext: Extrinsic, parent: str, child: str) -> Extrinsic:
 
 
 def _static_tf(path: Path, text: str) -> Extrinsic:
-    line = next(ln for ln in text.splitlines() if "static_transform_publisher" in ln and not ln.lstrip().startswith("#"))
+    line = next(ln for ln in text.splitlines() if _STATIC_TF.match(ln))
     try:
         tokens = shlex.split(line.split("static_transform_publisher", 1)[1], comments=True)
     except ValueError as exc:
