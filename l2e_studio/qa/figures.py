@@ -29,11 +29,13 @@ def data_uri_jpeg(rgb: np.ndarray, quality: int = 90) -> str:
 
 
 def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ext: Extrinsic, camera: CameraModel,
-            clip: float = 127.0, radius: int = 1) -> np.ndarray:
+            clip: float = 127.0, radius: int | None = None) -> np.ndarray:
     """The event map in grey with the lidar points projected at ``ext``, coloured by intensity."""
     m = np.clip(np.asarray(event_map, np.float32), 0, clip)
     hi = float(np.percentile(m, 99.5)) or 1.0
     grey = (np.clip(m / hi, 0, 1) * 255).astype(np.uint8)
+    if radius is None:  # single pixels on small maps, 3 px discs on full-size ones
+        radius = 0 if camera.width < 800 else 1
     img = cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
     cam_pts = ext.transform(np.asarray(points, np.float64))
     front = cam_pts[:, 2] > 0.05
@@ -50,7 +52,7 @@ def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ex
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         layer = cv2.dilate(layer, k)
         mask = cv2.dilate(mask, k)
-    img[mask > 0] = (0.25 * img[mask > 0] + 0.75 * layer[mask > 0]).astype(np.uint8)
+    img[mask > 0] = (0.35 * img[mask > 0] + 0.65 * layer[mask > 0]).astype(np.uint8)
     return img
 
 
