@@ -141,3 +141,86 @@ def _round(a) -> list:
 
 def _f(x: float) -> float | None:
     return None if not np.isfinite(x) else float(x)
+
+
+# --- exports of one extrinsic, each labelled with its direction ----------------------------------
+
+#: ``--format`` names of :func:`export_text`, with the file name suffix each is written under.
+EXPORT_FORMATS: dict[str, str] = {
+    "yaml": ".yaml",
+    "json": ".json",
+    "matrix": ".txt",
+    "ros1": ".ros1.txt",
+    "ros2": ".ros2.txt",
+    "urdf": ".urdf",
+    "kalibr": ".kalibr.yaml",
+}
+
+DIRECTION = "T_cam_lidar: maps points from the lidar frame into the camera frame, X_cam = R X_lidar + t"
+
+
+def export_text(
+    ext: Extrinsic,
+    fmt: str,
+    camera_frame: str = "camera",
+    lidar_frame: str = "lidar",
+    result: dict | None = None,
+) -> str:
+    """``T_cam_lidar`` in one export format (see :data:`EXPORT_FORMATS`), with a comment (or a
+    field) that says which frame maps to which. Every one reads back through
+    :func:`l2e_studio.io.cameras.load_seed`. ``result``: the full result dict for yaml/json
+    (default: the transform alone)."""
+    if fmt not in EXPORT_FORMATS:
+        raise ValueError(f"unknown export format {fmt!r}; expected one of {', '.join(EXPORT_FORMATS)}")
+    t, q = ext.translation, ext.quaternion_xyzw
+    num = lambda v: f"{v:.9f}".rstrip("0").rstrip(".") if abs(v) > 0 else "0"  # noqa: E731
+    if fmt in ("yaml", "json"):
+        data = dict(result) if result is not None else {"direction": DIRECTION, **extrinsic_to_dict(ext)}
+        data.setdefault("direction", DIRECTION)
+        if fmt == "json":
+            return json.dumps(data, indent=2) + "\n"
+        return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+    if fmt == "matrix":
+        rows = "\n".join(" ".join(f"{v: .10f}" for v in row) for row in ext.matrix)
+        return f"# {DIRECTION}\n# frames: {lidar_frame} -> {camera_frame}; 4x4 homogeneous, row major\n{rows}\n"
+    if fmt == "ros1":
+        args = " ".join(num(v) for v in [*t, *q])
+        return (
+            f"# ROS 1 (tf2_ros): publishes {camera_frame} -> {lidar_frame}, i.e. the pose of '{lidar_frame}' in "
+            f"'{camera_frame}' = {DIRECTION}\n"
+            f"# arguments: x y z qx qy qz qw frame_id child_frame_id\n"
+            f"rosrun tf2_ros static_transform_publisher {args} {camera_frame} {lidar_frame}\n"
+        )
+    if fmt == "ros2":
+        named = " ".join(f"--{k} {num(v)}" for k, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), [*t, *q]))
+        return (
+            f"# ROS 2 (tf2_ros): publishes {camera_frame} -> {lidar_frame}, i.e. the pose of '{lidar_frame}' in "
+            f"'{camera_frame}' = {DIRECTION}\n"
+            f"ros2 run tf2_ros static_transform_publisher {named} --frame-id {camera_frame} --child-frame-id {lidar_frame}\n"
+        )
+    if fmt == "urdf":
+        rpy = ext.rpy(degrees=False)
+        return (
+            f"<!-- URDF fixed joint: parent '{camera_frame}', child '{lidar_frame}'; origin = pose of the child in the "
+            f"parent = T_cam_lidar (maps lidar-frame points into the camera frame). rpy in radians, "
+            f"R = Rz(yaw) Ry(pitch) Rx(roll) -->\n"
+            f'<joint name="{camera_frame}_to_{lidar_frame}" type="fixed">\n'
+            f'  <parent link="{camera_frame}"/>\n'
+            f'  <child link="{lidar_frame}"/>\n'
+            f'  <origin xyz="{" ".join(num(v) for v in t)}" rpy="{" ".join(num(v) for v in rpy)}"/>\n'
+            f"</joint>\n"
+        )
+    # kalibr
+    data = {"cam0": {"T_cam_lidar": _round(ext.matrix), "rostopic": f"/{camera_frame}"}}
+    return (
+        f"# Kalibr-style camchain entry. {DIRECTION} (4x4, row major), as Kalibr's T_cam_imu is imu -> cam\n"
+        + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=200)
+    )
+
+
+def write_export(path: str | Path, ext: Extrinsic, fmt: str, **kwargs) -> Path:
+    """Write one export atomically (an existing file is kept as a timestamped backup)."""
+    text = export_text(ext, fmt, **kwargs)
+    path = Path(path)
+    atomic_write_bytes(path, text.encode(), keep_existing=True)
+    return path

@@ -16,7 +16,8 @@ from typing import Sequence
 from ..errors import InputError
 
 #: Sub-command modules, in the order ``--help`` lists them. "serve" is the default command.
-COMMANDS: tuple[str, ...] = ("serve", "calibrate", "synth", "accumulate", "extract")
+COMMANDS: tuple[str, ...] = ("serve", "calibrate", "synth", "accumulate", "extract",
+                             "heldout", "study", "landscape", "export", "report")
 DEFAULT_COMMAND = "serve"
 
 

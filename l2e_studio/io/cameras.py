@@ -107,6 +107,15 @@ def load_seed(path: str | Path) -> Extrinsic:
             return _extrinsic_from_matrix(path, np.load(path, allow_pickle=False))
         except (ValueError, OSError) as exc:
             raise InputError(path, f"cannot read the .npy matrix ({exc})") from exc
+    if path.is_file() and path.stat().st_size < 1_000_000:
+        from .seed_formats import seed_from_text  # ROS static_transform_publisher lines, URDF joints
+
+        try:
+            special = seed_from_text(path, path.read_text(encoding="utf-8"))
+        except UnicodeDecodeError:
+            special = None
+        if special is not None:
+            return special
     doc = _read_document(path)
     if isinstance(doc, str):
         if re.search(r"^\s*T\s*:", doc, re.MULTILINE):
@@ -340,6 +349,9 @@ def _seed_anywhere(path: Path, doc: dict) -> Extrinsic | None:
             seed = _seed_from_mapping(path, doc[key])
             if seed is not None:
                 return seed
+    for value in doc.values():  # Kalibr-style camchain: {cam0: {T_cam_lidar: 4x4, ...}}
+        if isinstance(value, dict) and isinstance(value.get("T_cam_lidar"), list):
+            return _extrinsic_from_matrix(path, value["T_cam_lidar"])
     for value in doc.values():  # OpenCalib extrinsic json: {name: {param: {sensor_calib: {data}}}}
         if isinstance(value, dict) and isinstance(value.get("param"), dict) and "sensor_calib" in value["param"]:
             return _extrinsic_from_matrix(path, value["param"]["sensor_calib"])

@@ -1,0 +1,154 @@
+"""Figures for the report: overlays with OpenCV, plots with matplotlib (Agg, no display)."""
+
+from __future__ import annotations
+
+import base64
+import io
+
+import cv2
+import numpy as np
+
+from ..camera import CameraModel
+from ..geometry import Extrinsic, in_image, project_points
+from . import AXES, UNITS
+
+
+def data_uri_png(rgb: np.ndarray) -> str:
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode()
+
+
+def data_uri_jpeg(rgb: np.ndarray, quality: int = 90) -> str:
+    ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR),
+                           [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode()
+
+
+def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ext: Extrinsic, camera: CameraModel,
+            clip: float = 127.0, radius: int | None = None) -> np.ndarray:
+    """The event map in grey with the lidar points projected at ``ext``, coloured by intensity."""
+    m = np.clip(np.asarray(event_map, np.float32), 0, clip)
+    hi = float(np.percentile(m, 99.5)) or 1.0
+    grey = (np.clip(m / hi, 0, 1) * 255).astype(np.uint8)
+    if radius is None:  # single pixels on small maps, 3 px discs on full-size ones
+        radius = 0 if camera.width < 800 else 1
+    img = cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
+    cam_pts = ext.transform(np.asarray(points, np.float64))
+    front = cam_pts[:, 2] > 0.05
+    uv, _ = project_points(cam_pts[front], camera)
+    inside = in_image(uv, camera)
+    uv = np.rint(uv[inside]).astype(np.int32)
+    val = np.clip(np.asarray(intensity, np.float64)[front][inside], 0, 255).astype(np.uint8)
+    colors = cv2.applyColorMap(val[:, None], cv2.COLORMAP_TURBO)[:, 0, ::-1]
+    layer = np.zeros_like(img)
+    mask = np.zeros(img.shape[:2], np.uint8)
+    layer[uv[:, 1], uv[:, 0]] = colors
+    mask[uv[:, 1], uv[:, 0]] = 255
+    if radius > 0:
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        layer = cv2.dilate(layer, k)
+        mask = cv2.dilate(mask, k)
+    img[mask > 0] = (0.35 * img[mask > 0] + 0.65 * layer[mask > 0]).astype(np.uint8)
+    return img
+
+
+def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h) of the ``frac``-sized window with the most event structure (gradient energy)."""
+    m = np.asarray(event_map, np.float32)
+    H, W = m.shape
+    w, h = max(8, int(W * frac)), max(8, int(H * frac))
+    g = np.abs(cv2.Sobel(m, cv2.CV_32F, 1, 0)) + np.abs(cv2.Sobel(m, cv2.CV_32F, 0, 1))
+    box = cv2.boxFilter(g, -1, (w, h), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    box[: h // 2, :] = -1
+    box[H - (h - h // 2):, :] = -1
+    box[:, : w // 2] = -1
+    box[:, W - (w - w // 2):] = -1
+    cy, cx = np.unravel_index(int(np.argmax(box)), box.shape)
+    return int(cx - w // 2), int(cy - h // 2), w, h
+
+
+def zoom(img: np.ndarray, box: tuple[int, int, int, int], factor: int = 2) -> np.ndarray:
+    x, y, w, h = box
+    return cv2.resize(img[y:y + h, x:x + w], (w * factor, h * factor), interpolation=cv2.INTER_NEAREST)
+
+
+def _fig_uri(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def landscape_figure(sweeps: list) -> str:
+    plt = _plt()
+    fig, axs = plt.subplots(2, 3, figsize=(11, 5.5))
+    for ax, s in zip(axs.ravel(), sweeps):
+        unit = "m" if s.axis in AXES[:3] else "deg"
+        ax.plot(s.offsets, s.mi, "o-", ms=3)
+        ax.axvline(0, color="k", lw=0.8, ls="--")
+        ax.set_title(f"{s.axis}: half width {s.half_width():.3g} {unit}", fontsize=9)
+        ax.set_xlabel(f"offset ({unit})")
+        ax.set_ylabel("MI (nats)")
+    fig.tight_layout()
+    return _fig_uri(fig)
+
+
+def landscape2d_figure(sw) -> str:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    oa, ob = sw.offsets
+    im = ax.imshow(sw.mi, origin="lower", aspect="auto", extent=[ob[0], ob[-1], oa[0], oa[-1]], cmap="viridis")
+    ax.plot([0], [0], "r+", ms=12)
+    ax.set_xlabel(f"{sw.axes[1]} offset ({'m' if sw.axes[1] in AXES[:3] else 'deg'})")
+    ax.set_ylabel(f"{sw.axes[0]} offset ({'m' if sw.axes[0] in AXES[:3] else 'deg'})")
+    fig.colorbar(im, ax=ax, label="MI (nats)")
+    return _fig_uri(fig)
+
+
+def scatter_figure(seeds: np.ndarray, results: np.ndarray, methods: list[str]) -> str:
+    """Result against seed per parameter (the paper's noise experiment)."""
+    plt = _plt()
+    fig, axs = plt.subplots(2, 3, figsize=(11, 6))
+    for k, ax in enumerate(axs.ravel()):
+        for m in sorted(set(methods)):
+            sel = np.array([mm == m for mm in methods])
+            ax.scatter(seeds[sel, k], results[sel, k], s=12, label=m)
+        ax.axhline(0, color="k", lw=0.8, ls="--")
+        ax.set_title(AXES[k], fontsize=9)
+        ax.set_xlabel(f"seed ({UNITS[k]})")
+        ax.set_ylabel(f"result ({UNITS[k]})")
+    axs[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    return _fig_uri(fig)
+
+
+def scene_count_figure(counts: list[int], stds: np.ndarray) -> str:
+    plt = _plt()
+    fig, axs = plt.subplots(1, 2, figsize=(10, 4))
+    for k in range(6):
+        ax = axs[0] if k < 3 else axs[1]
+        ax.plot(counts, stds[:, k], "o-", label=AXES[k])
+    for ax, unit in zip(axs, ("mm", "deg")):
+        ax.set_xlabel("scenes used")
+        ax.set_ylabel(f"std ({unit})")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.legend(fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return _fig_uri(fig)
