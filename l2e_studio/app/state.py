@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import Extrinsic
+from .history import History
 
 @dataclass(frozen=True)
 class RunState:
@@ -74,6 +75,7 @@ class SessionState:
     result: Any = None  # a calibrate.CalibrationResult once a run finishes
     follow_best: bool = True
     version: int = 0
+    history: History = field(default_factory=History, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     def __post_init__(self) -> None:
@@ -102,18 +104,38 @@ class SessionState:
             )
 
     # --- the extrinsic ---------------------------------------------------------------------
-    def set_extrinsic(self, extrinsic: Extrinsic) -> int:
-        """Make ``extrinsic`` the current one; returns the new version."""
+    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> int:
+        """Make ``extrinsic`` the current one (an undo step); returns the new version."""
         with self._lock:
+            if extrinsic is not self.extrinsic:
+                assert self.extrinsic is not None
+                self.history.record(self.extrinsic, source)
             self.extrinsic = extrinsic
             return self._bump()
 
     def reset_extrinsic(self) -> Extrinsic:
-        """Back to the file's seed."""
+        """Back to the file's seed (an undo step)."""
         with self._lock:
-            self.extrinsic = self.reference
-            self._bump()
+            self.set_extrinsic(self.reference, "reset")
             return self.reference
+
+    def undo(self) -> Extrinsic | None:
+        """Back one extrinsic change; None when there is nothing to undo."""
+        with self._lock:
+            earlier = self.history.undo(self.extrinsic)
+            if earlier is not None:
+                self.extrinsic = earlier
+                self._bump()
+            return earlier
+
+    def redo(self) -> Extrinsic | None:
+        """Forward one undone change; None when there is nothing to redo."""
+        with self._lock:
+            later = self.history.redo(self.extrinsic)
+            if later is not None:
+                self.extrinsic = later
+                self._bump()
+            return later
 
     # --- scenes ----------------------------------------------------------------------------
     def select(self, index: int) -> int:
@@ -199,9 +221,8 @@ class SessionState:
         with self._lock:
             if self.result is None:
                 raise RuntimeError("there is no result to accept")
-            self.extrinsic = self.result.extrinsic
-            self._bump()
-            return self.extrinsic
+            self.set_extrinsic(self.result.extrinsic, "accept")
+            return self.result.extrinsic
 
     def discard_result(self) -> None:
         with self._lock:

@@ -1,0 +1,68 @@
+"""Unit tests of the workbench's precision tools: undo/redo, exact number parsing, slider
+ranges, settings checks (no browser, no server)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from l2e_studio.app.history import History
+from l2e_studio.app.state import SessionState
+from l2e_studio.geometry import Extrinsic
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_history_keeps_at_least_fifty_steps_and_redoes_them():
+    h: History[int] = History(limit=200, clock=Clock())
+    current = 0
+    for v in range(1, 61):  # 60 separate changes ("nudge" never merges)
+        h.record(current, "nudge")
+        current = v
+    for expected in range(59, -1, -1):
+        current = h.undo(current)
+        assert current == expected
+    assert h.undo(current) is None
+    for expected in range(1, 61):
+        current = h.redo(current)
+        assert current == expected
+    assert h.redo(current) is None
+
+
+def test_history_merges_a_drag_burst_and_a_new_change_drops_redo():
+    clock = Clock()
+    h: History[int] = History(merge_seconds=0.5, clock=clock)
+    for v in range(5):  # one slider drag: 5 updates 0.1 s apart
+        h.record(v, "sliders")
+        clock.t += 0.1
+    assert h.depth == (1, 0)
+    clock.t += 2.0
+    h.record(5, "sliders")  # a new drag after a pause
+    assert h.depth == (2, 0)
+    assert h.undo(6) == 5 and h.depth == (1, 1)
+    h.record(5, "typed")
+    assert h.depth == (2, 0)
+
+
+def test_session_state_undo_covers_every_kind_of_change():
+    ref = Extrinsic(np.zeros(3), np.zeros(3))
+    st = SessionState(["a"], reference=ref)
+    a = ref.perturbed([0.01, 0, 0], [0, 0, 0])
+    b = ref.perturbed([0.02, 0, 0], [0, 0, 0])
+    st.set_extrinsic(a, "nudge")
+    st.set_extrinsic(b, "file")
+    st.reset_extrinsic()
+    assert st.snapshot().extrinsic is ref
+    assert st.undo() is b and st.undo() is a and st.undo() is ref and st.undo() is None
+    assert st.redo() is a and st.snapshot().extrinsic is a
+    st.result = type("R", (), {"extrinsic": b})()
+    st.accept_result()
+    assert st.snapshot().extrinsic is b and st.undo() is a
+    with pytest.raises(RuntimeError):
+        SessionState(["a"], reference=ref).accept_result()
