@@ -91,12 +91,30 @@ class App:
         return f"http://{shown}:{self.server.get_port()}"
 
     # --- changes from any panel ----------------------------------------------------------------
-    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> None:
-        """Make ``extrinsic`` current and update every view except the one it came from."""
+    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "", values: np.ndarray | None = None) -> None:
+        """Make ``extrinsic`` current (one undo step) and update every view but its source.
+
+        ``values``: the Seed panel's exact six numbers when the change came from there.
+        """
         with self._ui_lock:
-            self.state.set_extrinsic(extrinsic)
-            if source != "sliders":
-                self.extrinsic.show(extrinsic)
+            self.state.set_extrinsic(extrinsic, source)
+            self._show_extrinsic(extrinsic, source, values)
+
+    def undo(self) -> None:
+        with self._ui_lock:
+            ext = self.state.undo()
+            if ext is not None:
+                self._show_extrinsic(ext, "undo")
+
+    def redo(self) -> None:
+        with self._ui_lock:
+            ext = self.state.redo()
+            if ext is not None:
+                self._show_extrinsic(ext, "redo")
+
+    def _show_extrinsic(self, extrinsic: Extrinsic, source: str, values: np.ndarray | None = None) -> None:
+        with self._ui_lock:
+            self.extrinsic.show(extrinsic, values, source)
             if source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
@@ -235,8 +253,8 @@ class App:
 
     # --- results ----------------------------------------------------------------------------------
     def accept_result(self) -> None:
-        ext = self.state.accept_result()
-        self.set_extrinsic(ext, source="accept")
+        with self._ui_lock:
+            self._show_extrinsic(self.state.accept_result(), "accept")
 
     def save_result(self) -> tuple[Path, Path | None]:
         """Write the result file and a full-size side-by-side PNG of the selected scene."""
