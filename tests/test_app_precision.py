@@ -66,3 +66,25 @@ def test_session_state_undo_covers_every_kind_of_change():
     assert st.snapshot().extrinsic is b and st.undo() is a
     with pytest.raises(RuntimeError):
         SessionState(["a"], reference=ref).accept_result()
+
+
+def test_parse_number_takes_every_value_and_refuses_the_rest():
+    from l2e_studio.app.exact import format_value, is_partial, parse_number
+
+    assert parse_number("-0.1234") == -0.1234
+    assert parse_number(" −0,5 ") == -0.5  # a pasted minus sign and a decimal comma
+    assert parse_number("1e-4") == 1e-4 and parse_number("+3") == 3.0
+    for bad in ("", "-", "abc", "nan", "inf", "1..2"):
+        assert parse_number(bad) is None
+    assert all(is_partial(t) for t in ("", "-", "+", "1e-", "-."))
+    assert not is_partial("abc") and not is_partial("nan")
+    assert format_value(-0.1234) == "-0.1234" and format_value(-1e-9) == "0" and format_value(2.0) == "2"
+
+
+def test_centred_range_narrows_with_the_step():
+    from l2e_studio.app.exact import centred_range, nudged
+
+    assert centred_range(-1.726, 0.1, rotation=True) == pytest.approx((-11.726, 8.274))
+    assert centred_range(0.0, 1.0, rotation=True) == (-90.0, 90.0)  # capped
+    assert centred_range(0.05, 0.0001) == pytest.approx((0.04, 0.06))
+    assert nudged(-1.726, 0.1) == pytest.approx(-1.626, abs=1e-15)

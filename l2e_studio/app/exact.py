@@ -46,8 +46,8 @@ def format_value(value: float, decimals: int = 6) -> str:
 
 
 def nudged(value: float, delta: float) -> float:
-    """``value + delta`` without float dust (rounded at 1e-9, far below any step)."""
-    return round(float(value) + float(delta), 9)
+    """``value + delta``, nothing else: the digits a value had below the step are kept."""
+    return float(value) + float(delta)
 
 
 def centred_range(value: float, step: float, rotation: bool = False) -> tuple[float, float]:
