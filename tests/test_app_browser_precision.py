@@ -7,10 +7,12 @@ the reset-view button. Same fixtures as ``test_app_browser.py``.
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
 import pytest
+import yaml
 
 from app_fixtures import screenshot, wait_for
 from l2e_studio.app.pose import extrinsic_from_sliders
@@ -121,3 +123,96 @@ def test_keys_on_a_focused_slider_leave_the_3d_view_alone_and_reset_view(page, a
     page.get_by_role("button", name="Reset 3D view").click()
     wait_for(lambda: np.allclose(client.camera.position, app.server.initial_camera.position, atol=1e-3),
              what="the view back at its start")
+
+
+def text_field(page, label: str):
+    """The input of a viser text field with exactly this label."""
+    lab = page.locator("label").filter(has_text=re.compile(rf"^{re.escape(label)}$")).first
+    return lab.locator("xpath=ancestor::div[1]/..//input")
+
+
+def test_meaningless_settings_are_refused_beside_the_field_and_start_says_why(page, app):
+    open_tab(page, "Optimise")
+    start = page.get_by_role("button", name="Start")
+    assert start.is_enabled()
+    for label, bad, words in (("± translation (m)", "-0.1", "outside (0, 2] m"),
+                              ("± rotation (°)", "500", "500 ° is outside (0, 45]"),
+                              ("Smoothing σ (px)", "0", "outside (0, 50] px"),
+                              ("Smoothing σ (px)", "nan", "is not a number")):
+        field = text_field(page, label)
+        good = field.input_value()
+        field.fill(bad)
+        page.get_by_text(words).first.wait_for()
+        wait_for(lambda: not start.is_enabled(), what=f"Start disabled for {label} = {bad}")
+        page.get_by_text("Start is disabled: fix the settings").first.wait_for()
+        assert field.input_value() == bad  # kept as typed: never clamped
+        screenshot(page, "13_refused_input")
+        field.fill(good)
+        wait_for(lambda: start.is_enabled(), what="Start enabled again")
+    with pytest.raises(ValueError):
+        app.optimise.t_bound.value = "-0.1"
+        app.optimise.settings()
+    app.optimise.t_bound.value = "0.2"
+    # nothing to run on: no scene included
+    open_tab(page, "Scenes")
+    page.get_by_role("button", name="none").click()
+    open_tab(page, "Optimise")
+    page.get_by_text("no scene is included").first.wait_for()
+    assert not start.is_enabled()
+
+
+def test_held_out_scenes_are_in_the_result_table_and_file_and_saved_text_is_never_stale(page, app):
+    app.state.set_included(1, False)  # scene_001 held out
+    app.inclusion_changed()
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    r = app.state.snapshot().result
+    assert "scene_001" not in r.scene_names
+    # the overlay stays on the result once the run is over
+    assert app.state.snapshot().shown_extrinsic is r.extrinsic
+    page.get_by_text("showing the last run's result").first.wait_for()
+    open_tab(page, "Result")
+    page.get_by_role("cell", name="scene_001 (held out)").wait_for()
+    assert "nan" not in page.locator("body").inner_text().lower()
+    screenshot(page, "14_held_out_rows")
+    page.get_by_role("button", name="Save result").click()
+    page.get_by_text("Saved").first.wait_for()
+    doc = yaml.safe_load(next(app.out_dir.glob("l2e_result_*.yaml")).read_text())
+    held = [e for e in doc["mi"]["per_scene"] if e.get("held_out")]
+    assert [e["scene"] for e in held] == ["scene_001"] and doc["scenes_held_out"] == ["scene_001"]
+    assert np.isfinite(held[0]["seed"]) and np.isfinite(held[0]["result"])
+    page.get_by_role("button", name="Discard").click()
+    wait_for(lambda: app.results.saved.content == "", what="the Saved line to go with its result")
+    assert page.get_by_text("Saved `").count() == 0
+
+
+def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(page, app, monkeypatch):
+    import l2e_studio.app.server as server_module
+
+    real = server_module.calibrate
+
+    def slow_to_stop(*args, **kwargs):  # an optimiser that takes 1.5 s to wind down after a cancel
+        result = real(*args, **kwargs)
+        time.sleep(1.5)
+        return result
+
+    monkeypatch.setattr(server_module, "calibrate", slow_to_stop)
+    app.optimise.method.value = "Nelder-Mead"
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    wait_for(lambda: app.state.snapshot().run.evaluations >= 10, timeout=60, what="the run to get going")
+    t0 = time.monotonic()
+    page.get_by_role("button", name="Cancel").click()
+    page.get_by_text("Cancelling...").first.wait_for(timeout=2_000)
+    shown_after = time.monotonic() - t0
+    assert shown_after < 1.0, f"'Cancelling...' appeared after {shown_after:.2f} s"
+    assert app.state.snapshot().run.status == "running"  # still winding down: the text is honest
+    page.get_by_text("Cancelled").first.wait_for(timeout=20_000)
+    screenshot(page, "15_cancelled")
+    open_tab(page, "Result")
+    accept = page.get_by_role("button", name="Accept best-so-far as seed")
+    accept.wait_for()
+    assert app.results.accept.color != "green"
+    page.get_by_text("Run cancelled").first.wait_for()

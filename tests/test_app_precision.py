@@ -88,3 +88,37 @@ def test_centred_range_narrows_with_the_step():
     assert centred_range(0.0, 1.0, rotation=True) == (-90.0, 90.0)  # capped
     assert centred_range(0.05, 0.0001) == pytest.approx((0.04, 0.06))
     assert nudged(-1.726, 0.1) == pytest.approx(-1.626, abs=1e-15)
+
+
+def test_settings_checks_refuse_instead_of_clamping():
+    from l2e_studio.app.checks import check_rotation_bound, check_sigma, check_translation_bound, start_blocker
+
+    assert check_translation_bound("0.2").value == 0.2
+    for bad, words in (("-0.1", "outside"), ("0", "Rotation only"), ("3", "outside"), ("nan", "not a number")):
+        c = check_translation_bound(bad)
+        assert c.value is None and words in c.problem
+    assert check_rotation_bound("500").value is None and "500" in check_rotation_bound("500").problem
+    assert check_rotation_bound("45").value == 45.0
+    assert check_sigma("0").value is None and check_sigma("NaN").value is None and check_sigma("2.5").value == 2.5
+    assert "no scene is included" in start_blocker(0, [], False)
+    assert start_blocker(3, ["x"], False) and start_blocker(3, [], True) and start_blocker(3, [], False) == ""
+
+
+def test_numbers_never_read_nan():
+    from l2e_studio.app.text import num
+
+    assert num(float("nan")) == "—" and num(None) == "—" and num(float("inf")) == "—"
+    assert num(0.12345) == "0.1235" and num(0.1, signed=True) == "+0.1000"
+
+
+def test_state_shows_the_result_after_a_run_until_the_extrinsic_changes():
+    from types import SimpleNamespace
+
+    ref = Extrinsic(np.zeros(3), np.zeros(3))
+    st = SessionState(["a"], reference=ref)
+    run = st.begin_run()
+    best = ref.perturbed([0.01, 0, 0], [0, 0, 0])
+    st.finish_run(run, SimpleNamespace(extrinsic=best, cancelled=False))
+    assert st.snapshot().shown_extrinsic is best and st.snapshot().extrinsic is ref
+    st.set_extrinsic(ref.perturbed([0, 0.01, 0], [0, 0, 0]), "nudge")
+    assert st.snapshot().shown_extrinsic is st.snapshot().extrinsic

@@ -24,6 +24,7 @@ from ..geometry import Extrinsic
 from ..scenes import SceneSet
 from .display import SceneDisplay
 from .files import save_result
+from .heldout import HeldOutScore, held_out_scores
 from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
@@ -33,6 +34,7 @@ from .panels.scenes import ScenesPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .state import SessionState
+from .text import num
 from .workers import LatestWorker, Ticker
 
 log = logging.getLogger(__name__)
@@ -54,6 +56,7 @@ class App:
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
         self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma)
         self.reading: MiReading | None = None
+        self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self._reference_mi: dict[tuple, float] = {}
         self._cancel: threading.Event | None = None
         self._run_thread: threading.Thread | None = None
@@ -132,6 +135,7 @@ class App:
 
     def inclusion_changed(self) -> None:
         self.scenes.show_selection()
+        self.optimise.show_start()
         self.mi_worker.poke()
 
     def display_changed(self) -> None:
@@ -213,7 +217,12 @@ class App:
         if self._cancel is None or not self.state.snapshot().run.active:
             return False
         self._cancel.set()
+        self.optimise.show_progress(self.state.snapshot().run)  # "Cancelling..." at once
         return True
+
+    def cancel_requested(self) -> bool:
+        """True once Cancel was pressed for the run in progress."""
+        return self._cancel is not None and self._cancel.is_set() and self.state.snapshot().run.active
 
     def wait_run(self, timeout: float = 60.0) -> bool:
         t = self._run_thread
@@ -234,7 +243,8 @@ class App:
         snap = self.state.snapshot()
         self.optimise.show_progress(snap.run)
         self.optimise.show_running(False)
-        self.results.show(snap)
+        self.held_out = self._score_held_out(snap.result)
+        self.results.show(snap, self.held_out)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
@@ -246,12 +256,21 @@ class App:
             verb = "cancelled" if r.cancelled else "finished"
             self.notify_all(
                 f"Optimisation {verb}",
-                f"MI {r.mi_seed:.4f} -> {r.mi_result:.4f} after {r.evaluations} evaluations "
+                f"MI {num(r.mi_seed)} -> {num(r.mi_result)} after {r.evaluations} evaluations "
                 f"({r.seconds:.1f} s). See the Result tab and Before / after.",
                 color="yellow" if r.cancelled else "green",
             )
 
     # --- results ----------------------------------------------------------------------------------
+    def _score_held_out(self, result: CalibrationResult | None) -> list[HeldOutScore]:
+        if result is None:
+            return []
+        try:
+            return held_out_scores(result, self.state.scene_names, self.readout)
+        except Exception:  # a score is not worth losing the result over
+            log.exception("scoring the held-out scenes failed")
+            return []
+
     def accept_result(self) -> None:
         with self._ui_lock:
             self._show_extrinsic(self.state.accept_result(), "accept")
@@ -262,10 +281,12 @@ class App:
         if snap.result is None:
             raise RuntimeError("there is no result to save")
         image = self.compare.compose(snap, mode="side by side", scale=1.0)
-        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image)
+        held = self._score_held_out(snap.result)  # the inclusion may have changed since the run
+        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held)
 
     def discard_result(self) -> None:
         self.state.discard_result()
+        self.held_out = []
         self.results.show(self.state.snapshot())
         self.compare_worker.poke()
         self.mi_worker.poke()

@@ -53,12 +53,16 @@ class Snapshot:
     run: RunState
     result: Any
     follow_best: bool
+    showing_result: bool = False
 
     @property
     def shown_extrinsic(self) -> Extrinsic:
-        """The pose the overlay draws: the best estimate while a run is followed, else ours."""
+        """The pose the overlay draws: the best estimate while a run is followed, the run's
+        result after it (until the extrinsic is changed, accepted or discarded), else ours."""
         if self.run.active and self.follow_best and self.run.best is not None:
             return self.run.best
+        if self.showing_result and self.result is not None:
+            return self.result.extrinsic
         return self.extrinsic
 
 
@@ -74,6 +78,7 @@ class SessionState:
     run: RunState = field(default_factory=RunState)
     result: Any = None  # a calibrate.CalibrationResult once a run finishes
     follow_best: bool = True
+    showing_result: bool = False  # the overlay stays on a run's result until the next change
     version: int = 0
     history: History = field(default_factory=History, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
@@ -101,6 +106,7 @@ class SessionState:
                 self.run,
                 self.result,
                 self.follow_best,
+                self.showing_result,
             )
 
     # --- the extrinsic ---------------------------------------------------------------------
@@ -111,6 +117,7 @@ class SessionState:
                 assert self.extrinsic is not None
                 self.history.record(self.extrinsic, source)
             self.extrinsic = extrinsic
+            self.showing_result = False
             return self._bump()
 
     def reset_extrinsic(self) -> Extrinsic:
@@ -124,7 +131,7 @@ class SessionState:
         with self._lock:
             earlier = self.history.undo(self.extrinsic)
             if earlier is not None:
-                self.extrinsic = earlier
+                self.extrinsic, self.showing_result = earlier, False
                 self._bump()
             return earlier
 
@@ -133,7 +140,7 @@ class SessionState:
         with self._lock:
             later = self.history.redo(self.extrinsic)
             if later is not None:
-                self.extrinsic = later
+                self.extrinsic, self.showing_result = later, False
                 self._bump()
             return later
 
@@ -158,6 +165,7 @@ class SessionState:
     def set_follow_best(self, flag: bool) -> int:
         with self._lock:
             self.follow_best = bool(flag)
+            self.showing_result = self.showing_result and self.follow_best
             return self._bump()
 
     # --- the optimisation run ---------------------------------------------------------------
@@ -170,6 +178,7 @@ class SessionState:
                 raise RuntimeError("no scene is included in the optimisation")
             run_id = self.run.run_id + 1
             self.run = RunState(status="running", started=time.time(), run_id=run_id, best=self.extrinsic)
+            self.showing_result = False
             self._bump()
             return run_id
 
@@ -212,6 +221,7 @@ class SessionState:
                                fraction=1.0 if status == "done" else self.run.fraction)
             if result is not None:
                 self.result = result
+                self.showing_result = self.follow_best
             self._bump()
             return True
 
@@ -227,6 +237,7 @@ class SessionState:
     def discard_result(self) -> None:
         with self._lock:
             self.result = None
+            self.showing_result = False
             self._bump()
 
     def _bump(self) -> int:

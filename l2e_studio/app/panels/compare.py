@@ -9,6 +9,7 @@ import numpy as np
 
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
+from ..text import num
 
 if TYPE_CHECKING:
     from ..server import App
@@ -55,12 +56,12 @@ class ComparePanel:
         name = self.app.state.scene_names[snap.selected]
         try:
             k = list(r.scene_names).index(name)
-            scores = f"MI of this scene {r.mi_seed_per_scene[k]:.4f} (seed) -> {r.mi_result_per_scene[k]:.4f} (result)"
+            scores = f"MI of this scene {num(r.mi_seed_per_scene[k])} (seed) -> {num(r.mi_result_per_scene[k])} (result)"
         except ValueError:  # held out of the optimisation: score it with the readout's stack
             everything = [True] * len(self.app.state.scene_names)
             mi_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
             mi_res = self.app.readout.read(r.extrinsic, everything).per_scene[snap.selected]
-            scores = f"held out of the optimisation; MI {mi_seed:.4f} (seed) -> {mi_res:.4f} (result)"
+            scores = f"held out of the optimisation; MI {num(mi_seed)} (seed) -> {num(mi_res)} (result)"
         self.caption.content = f"**{name}**: {scores}"
         self.image.image = img
         self.image.visible = True

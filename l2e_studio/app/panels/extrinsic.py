@@ -16,6 +16,7 @@ from ..files import save_seed, seed_document, seed_from_upload
 from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_extrinsic
 from ..readout import MiReading
 from ..state import Snapshot
+from ..text import num
 
 if TYPE_CHECKING:
     from ..server import App
@@ -119,7 +120,7 @@ class ExtrinsicPanel:
         self._set_value(i, nudged(self.values[i], sign * self.step_of(i)), "nudge")
 
     def _show_note(self, text: str) -> None:
-        self.note.content = f"⚠️ {text}" if text else ""
+        self.note.content = f"⚠ {text}" if text else ""
         self.note.visible = bool(text)
 
     def _apply_step(self) -> None:
@@ -188,7 +189,7 @@ class ExtrinsicPanel:
         n_in = sum(snap.included)
         delta = reading.total - reference_mi
         self.readout.content = (
-            f"**MI · {name}: {reading.per_scene[snap.selected]:.4f}**  \n"
-            f"**MI · {n_in} included scenes: {reading.total:.4f}** "
-            f"({delta:+.4f} vs file seed)"
+            f"**MI · {name}: {num(reading.per_scene[snap.selected])}**  \n"
+            f"**MI · {n_in} included scenes: {num(reading.total)}** "
+            f"({num(delta, signed=True)} vs file seed)"
         )

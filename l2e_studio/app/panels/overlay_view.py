@@ -11,6 +11,7 @@ from ..display import MAP_MODES
 from ..overlay import COLOR_MODES, OverlayStyle, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
+from ..text import num
 
 if TYPE_CHECKING:
     from ..server import App
@@ -78,10 +79,14 @@ class OverlayPanel:
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]
-        mi = "" if reading is None else f" · MI {reading.per_scene[snap.selected]:.4f}"
+        mi = "" if reading is None else f" · MI {num(reading.per_scene[snap.selected])}"
+        if snap.showing_result and snap.result is not None and not snap.run.active:
+            mi += " at your extrinsic"  # the reading is of the current extrinsic, not of the result shown
         note = ""
         if snap.run.active and snap.follow_best:
             note = " · showing the optimiser's best estimate"
+        elif snap.showing_result and snap.result is not None:
+            note = " · showing the last run's result: accept it in Result, or change the extrinsic to see yours"
         elif snap.result is not None and not np.allclose(snap.result.extrinsic.params, snap.extrinsic.params):
             note = " · a result is waiting: compare it in Before / after, accept it in Result"
         self.caption.content = f"**{name}**{mi}{note}"
