@@ -216,3 +216,19 @@ def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(p
     accept.wait_for()
     assert app.results.accept.color != "green"
     page.get_by_text("Run cancelled").first.wait_for()
+
+
+def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
+    open_tab(page, "Result")
+    field = text_field(page, "Results folder")
+    assert field.input_value() == str(app.out_dir)
+    elsewhere = tmp_path / "elsewhere"
+    field.fill(str(elsewhere))
+    wait_for(lambda: app.out_dir == elsewhere, what="the new results folder")
+    inside = app.scene_set.root / "results"
+    field.fill(str(inside))
+    page.get_by_text("is inside the scene folder").first.wait_for()
+    assert app.out_dir == inside  # allowed when asked, with a warning
+    field.fill("")
+    page.get_by_text("cannot be empty").first.wait_for()
+    assert app.out_dir == inside

@@ -122,3 +122,17 @@ def test_state_shows_the_result_after_a_run_until_the_extrinsic_changes():
     assert st.snapshot().shown_extrinsic is best and st.snapshot().extrinsic is ref
     st.set_extrinsic(ref.perturbed([0, 0.01, 0], [0, 0, 0]), "nudge")
     assert st.snapshot().shown_extrinsic is st.snapshot().extrinsic
+
+
+def test_scan_cache_lives_in_the_user_cache_dir_not_the_data_folder(tmp_path, monkeypatch):
+    from app_fixtures import write_small_scenes
+    from l2e_studio.scenes import load_scene_folder
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    folder = write_small_scenes(tmp_path / "data", n_scenes=2)
+    before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
+    load_scene_folder(folder)
+    load_scene_folder(folder)  # second load: from the cache
+    assert sorted(p.relative_to(folder) for p in folder.rglob("*")) == before
+    cached = list((tmp_path / "cache" / "l2e-studio" / "scans").rglob("*.npy"))
+    assert len(cached) == 2

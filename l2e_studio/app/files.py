@@ -27,6 +27,29 @@ from .overlay import encode_png
 SEED_SUFFIXES = (".yaml", ".yml", ".json", ".txt", ".npy")
 
 
+def default_results_dir(scenes_root: str | Path, cwd: Path | None = None) -> Path:
+    """``./l2e_results/<scene folder name>``: beside where the app runs, never inside the data."""
+    return (cwd or Path.cwd()) / "l2e_results" / Path(scenes_root).resolve().name
+
+
+def check_results_dir(text: str, scenes_root: str | Path) -> tuple[Path | None, str]:
+    """(folder, note) for a results folder typed by hand; folder None when it cannot be one."""
+    text = str(text).strip()
+    if not text:
+        return None, "the results folder cannot be empty"
+    folder = Path(text).expanduser()
+    if not folder.is_absolute():
+        folder = Path.cwd() / folder
+    if folder.exists() and not folder.is_dir():
+        return None, f"{folder} is a file, not a folder"
+    root = Path(scenes_root).resolve()
+    try:
+        folder.resolve().relative_to(root)
+        return folder, f"{folder} is inside the scene folder: results will be written into the data"
+    except ValueError:
+        return folder, ""
+
+
 def fresh_path(folder: Path, stem: str, suffix: str, when: _dt.datetime | None = None) -> Path:
     """``folder/<stem>_<YYYYmmdd-HHMMSS>[-n]<suffix>`` that does not exist yet."""
     stamp = (when or _dt.datetime.now()).strftime("%Y%m%d-%H%M%S")

@@ -23,7 +23,7 @@ from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibr
 from ..geometry import Extrinsic
 from ..scenes import SceneSet
 from .display import SceneDisplay
-from .files import save_result
+from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
 from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
@@ -284,6 +284,16 @@ class App:
         held = self._score_held_out(snap.result)  # the inclusion may have changed since the run
         return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held)
 
+    def set_out_dir(self, text: str) -> str:
+        """Use the folder ``text`` for results and seeds from now on; returns a note ("" if none).
+
+        Raises ValueError (nothing changes) when ``text`` cannot be a folder."""
+        folder, note = check_results_dir(text, self.scene_set.root)
+        if folder is None:
+            raise ValueError(note)
+        self.out_dir = folder
+        return note
+
     def discard_result(self) -> None:
         self.state.discard_result()
         self.held_out = []
@@ -324,7 +334,7 @@ def build_app(
 ) -> App:
     """Start a viser server on ``host:port`` and build the workbench on it."""
     server = viser.ViserServer(host=host, port=port, label=TITLE, verbose=verbose)
-    out = Path(out_dir) if out_dir is not None else Path(scene_set.root) / "results"
+    out = Path(out_dir) if out_dir is not None else default_results_dir(scene_set.root)
     try:
         return App(scene_set, server, out)
     except BaseException:

@@ -30,11 +30,23 @@ class ResultPanel:
         self.save = gui.add_button("Save result", icon=viser.Icon.DEVICE_FLOPPY, disabled=True,
                                    hint="Write a result file and a before/after PNG into the results folder")
         self.saved = gui.add_markdown("")
+        self.folder = gui.add_text("Results folder", str(app.out_dir),
+                                   hint="Where result files and seeds are written (created on the first save)")
+        self.folder_note = gui.add_markdown("", visible=False)
+        self.folder.on_update(self._on_folder)
         self.table = gui.add_markdown("")
         self.accept.on_click(self._accept)
         self.discard.on_click(lambda event: app.discard_result())
         self.save.on_click(self._on_save)
         self._saved_for: object | None = None  # the result the "Saved ..." line is about
+
+    def _on_folder(self, event) -> None:
+        try:
+            note = self.app.set_out_dir(self.folder.value)
+        except ValueError as exc:
+            note = f"{exc}; still writing to {self.app.out_dir}"
+        self.folder_note.content = f"⚠ {note}" if note else ""
+        self.folder_note.visible = bool(note)
 
     def _accept(self, event) -> None:
         self.app.accept_result()
