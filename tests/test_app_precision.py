@@ -136,3 +136,16 @@ def test_scan_cache_lives_in_the_user_cache_dir_not_the_data_folder(tmp_path, mo
     assert sorted(p.relative_to(folder) for p in folder.rglob("*")) == before
     cached = list((tmp_path / "cache" / "l2e-studio" / "scans").rglob("*.npy"))
     assert len(cached) == 2
+
+
+def test_panels_never_import_the_server_module():
+    import ast
+    from pathlib import Path
+
+    import l2e_studio.app.panels as panels
+
+    for path in Path(panels.__file__).parent.glob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                assert not (node.module or "").endswith("server"), f"{path.name} imports {node.module}"

@@ -143,6 +143,15 @@ class App:
         self.overlay_worker.poke()
         self.compare_worker.poke()
 
+    def compare_changed(self) -> None:
+        """A before/after control moved."""
+        self.compare_worker.poke()
+
+    def follow_changed(self, follow: bool) -> None:
+        """The overlay follows the optimiser's best estimate (and shows the result after) or not."""
+        self.state.set_follow_best(follow)
+        self.overlay_worker.poke()
+
     def sigma_changed(self, sigma: float) -> None:
         self.readout.set_sigma(sigma)
         self.mi_worker.poke()

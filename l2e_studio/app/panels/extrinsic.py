@@ -3,11 +3,10 @@ the live MI readout of the selected scene and of the included scenes."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import viser
 
+from ..context import Workbench
 from ...errors import InputError
 from ...geometry import Extrinsic
 from ..browser_js import KEY_HANDLING_HTML, hide_slider_boxes
@@ -17,9 +16,6 @@ from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
-
-if TYPE_CHECKING:
-    from ..server import App
 
 #: Step choices: (metres, degrees).
 STEPS = {
@@ -43,7 +39,7 @@ def _step_label(delta: float, rotation: bool) -> str:
 
 
 class ExtrinsicPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         self.reference = app.state.reference

@@ -7,21 +7,17 @@ The run itself is :func:`l2e_studio.calibrate.calibrate` in a worker thread (see
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
-
 import numpy as np
 import viser
 import viser.uplot
 
+from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
 from ..text import num
 from ..state import RunState
-
-if TYPE_CHECKING:
-    from ..server import App
 
 IDLE_TEXT = "Idle. Start optimises the included scenes from the current extrinsic."
 STATUS_WORDS = {
@@ -34,7 +30,7 @@ STATUS_WORDS = {
 
 
 class OptimisePanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         defaults = CalibrationSettings()
@@ -79,7 +75,7 @@ class OptimisePanel:
         self.best_text = gui.add_markdown("")
         self.start.on_click(self._on_start)
         self.cancel.on_click(self._on_cancel)
-        self.follow.on_update(lambda _: (app.state.set_follow_best(self.follow.value), app.overlay_worker.poke()))
+        self.follow.on_update(lambda _: app.follow_changed(bool(self.follow.value)))
         for handle in (self.t_bound, self.r_bound, self.sigma_in):
             handle.on_update(lambda _: self.check())
         self.check()

@@ -3,18 +3,14 @@ projected at the current extrinsic, and the display controls."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from ..context import Workbench
 from ..display import MAP_MODES
 from ..overlay import COLOR_MODES, OverlayStyle, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
-
-if TYPE_CHECKING:
-    from ..server import App
 
 JPEG_QUALITY = 80
 PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
@@ -23,7 +19,7 @@ PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and t
 class OverlayPanel:
     """A dockable panel with two tabs: the live overlay and (filled by ComparePanel) before/after."""
 
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         cam = app.camera
@@ -63,7 +59,7 @@ class OverlayPanel:
         )
 
     def base_image(self, index: int, style: OverlayStyle) -> np.ndarray:
-        sigma = self.app.optimise.sigma()
+        sigma = self.app.readout.sigma
         return self.app.displays[index].base(style.contrast, self.map_mode.value, sigma)
 
     def draw(self, index: int, extrinsic, style: OverlayStyle | None = None) -> np.ndarray:

@@ -3,24 +3,22 @@ the new seed or discard it, and save the result file with a before/after image."
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import viser
 
+from ..context import Workbench
 from ...errors import InputError
 from ..heldout import HeldOutScore
 from ..pose import describe
 from ..text import num
 from ..state import Snapshot
 
-if TYPE_CHECKING:
-    from ..server import App
-
 NO_RESULT = "No result yet."
 
 
 class ResultPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         self.summary = gui.add_markdown(NO_RESULT)

@@ -3,17 +3,13 @@ see every scene's MI at the current extrinsic and the scenes that failed to load
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from ..context import Workbench
 from ..readout import MiReading
 from ..text import num
 
-if TYPE_CHECKING:
-    from ..server import App
-
 
 class ScenesPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         ss = app.scene_set

@@ -4,15 +4,11 @@ the same extrinsic as the sliders."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import viser
 
+from ..context import Workbench
 from ...geometry import Extrinsic
-
-if TYPE_CHECKING:
-    from ..server import App
 
 FRUSTUM_SCALE = 0.6  # m
 GIZMO_SCALE = 0.9
@@ -32,7 +28,7 @@ def extrinsic_from_pose(wxyz: np.ndarray, position: np.ndarray) -> Extrinsic:
 
 
 class View3D:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         scene = app.server.scene
         cam = app.camera
