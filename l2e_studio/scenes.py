@@ -9,7 +9,7 @@ Layout (the reference code's, extended to every format :mod:`l2e_studio.io` read
 
 Maps and scans are paired by file stem. Files without a partner are reported in
 ``SceneSet.unpaired``; a scene whose files cannot be read becomes a :class:`SceneFailure`
-while the others load. Parsed scans are cached in ``DIR/.l2e_cache`` (keyed by file size and
+while the others load. Parsed scans are cached in the user's cache folder (:mod:`~l2e_studio.cachedir`) (keyed by file size and
 modification time) so the second load of a large folder is fast.
 """
 
@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from .atomic import atomic_write_bytes
+from .cachedir import folder_key, user_cache_dir
 from .camera import CameraModel
 from .errors import InputError
 from .geometry import Extrinsic
@@ -35,7 +36,7 @@ from .io.maps import MAP_SUFFIXES, guess_kind, load_map
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
 RIG_FILES = ("camera.yaml", "camera.yml", "config/config.json", "config.json")
-CACHE_DIR = ".l2e_cache"
+CACHE_DIR = ".l2e_cache"  # where earlier versions cached scans (inside the data folder); no longer written
 
 
 @dataclass
@@ -222,7 +223,7 @@ def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, 
     if cache_root is not None:
         st = path.stat()
         key = hashlib.sha1(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
-        cache_file = cache_root / CACHE_DIR / f"{path.name}.{key}.npy"
+        cache_file = user_cache_dir("scans", folder_key(cache_root)) / f"{path.name}.{key}.npy"
         if cache_file.is_file():
             try:
                 arr = np.load(cache_file)

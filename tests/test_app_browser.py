@@ -7,6 +7,7 @@ server's state. Screenshots land in ``test-artifacts/app/``.
 
 from __future__ import annotations
 
+import re
 import time
 
 import cv2
@@ -105,6 +106,12 @@ def number_field(page, label: str):
     return slider_root(page, label).locator("xpath=..").locator("input.mantine-NumberInput-input")
 
 
+def exact_field(page, axis: str):
+    """The Seed tab's exact text field of one axis (``x``, ``roll`` ...)."""
+    label = page.locator("label").filter(has_text=re.compile(rf"^{re.escape(axis)} =$")).first
+    return label.locator("xpath=ancestor::div[1]/..//input")
+
+
 def readout(page) -> str:
     return page.get_by_text("included scenes:").inner_text()
 
@@ -150,8 +157,8 @@ def test_slider_move_changes_overlay_and_mi_readout(page, app):
     assert app.overlay.frames > frames0
 
     # typing into the number field of x moves the translation
-    x_new = round(float(app.state.reference.translation[0]) + 0.02, 3)  # the field shows 3 decimals
-    field = number_field(page, "x (m)")
+    x_new = round(float(app.state.reference.translation[0]) + 0.02, 3)
+    field = exact_field(page, "x")
     field.fill(str(x_new))
     field.press("Enter")
     wait_for(lambda: abs(app.state.snapshot().extrinsic.translation[0] - x_new) < 1e-9, what="x typed in")
@@ -230,10 +237,10 @@ def test_two_tabs_share_state_and_a_closed_tab_loses_nothing(browser, context, a
         open_app(b, app)
         open_tab(a, "Seed")
         open_tab(b, "Seed")
-        field = number_field(a, "yaw (°)")
+        field = exact_field(a, "yaw")
         field.fill("1.5")
         field.press("Enter")
-        wait_for(lambda: number_field(b, "yaw (°)").input_value() == "1.5", what="tab B's yaw field")
+        wait_for(lambda: exact_field(b, "yaw").input_value() == "1.5", what="tab B's yaw field")
         wait_for(lambda: app.mi_worker.wait_idle(5) and readout(a) == readout(b), what="the same readout in both")
 
         open_tab(a, "Scenes")

@@ -81,7 +81,7 @@ def test_build_app_defaults_to_loopback(tmp_path):
     try:
         assert app.server.get_host() == "127.0.0.1"
         assert app.url.startswith("http://127.0.0.1:")
-        assert app.out_dir == scene_set.root / "results"
+        assert app.out_dir == Path.cwd() / "l2e_results" / scene_set.root.name  # never inside the data
     finally:
         app.stop()
 

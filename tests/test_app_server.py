@@ -67,7 +67,7 @@ def test_gizmo_and_sliders_edit_the_same_extrinsic(app):
     assert app.overlay.frames > frames
     # and the other way: a slider move re-poses the gizmo
     app.extrinsic.sliders[0].value = float(app.extrinsic.sliders[0].value) + 0.05
-    app.extrinsic._on_slider(user())
+    app.extrinsic._on_slider(user(), 0)
     w2, p2 = camera_pose(app.state.snapshot().extrinsic)
     assert np.allclose(app.view3d.gizmo.position, p2) and not np.allclose(p2, pos)
 

@@ -18,7 +18,8 @@ def _events(seed: int, n: int = 5000):
     return rng.integers(0, 64, n), rng.integers(0, 32, n), t, rng.integers(0, 2, n)
 
 
-def test_accumulate_folder(tmp_path: Path, capsys) -> None:
+def test_accumulate_folder(tmp_path: Path, capsys, monkeypatch) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     (tmp_path / "events_raw").mkdir()
     (tmp_path / "event").mkdir()
     (tmp_path / "events_raw" / "s1.raw").write_bytes(pr.encode_evt3(*_events(1), 64, 32))

@@ -146,7 +146,8 @@ def test_hot_pixels_are_zeroed() -> None:
     assert out[10, 10] == 0 and np.count_nonzero(out != counts) <= 3
 
 
-def test_cache_used_and_invalidated(tmp_path: Path, events) -> None:
+def test_cache_used_and_invalidated(tmp_path: Path, events, monkeypatch) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     x, y, t, p = events
     path = tmp_path / "event" / "s1.raw"
     path.parent.mkdir()
@@ -168,16 +169,16 @@ def test_cache_used_and_invalidated(tmp_path: Path, events) -> None:
     np.testing.assert_array_equal(accumulate_events_cached(path, width=W, height=H), first)
 
 
-def test_unwritable_beside_cache_falls_back_to_user_dir(tmp_path: Path, events, monkeypatch) -> None:
+def test_map_cache_goes_to_the_user_cache_dir_never_beside_the_data(tmp_path: Path, events, monkeypatch) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     x, y, t, p = events
-    path = tmp_path / "ro" / "s.dat"
+    path = tmp_path / "data" / "s.dat"
     path.parent.mkdir()
     path.write_bytes(pr.encode_dat(x, y, t, p, W, H))
-    beside, user = cache_paths(path)
-    beside.mkdir()  # a directory where the cache file would go: the write there fails (even as root)
+    user, beside = cache_paths(path)
     first = accumulate_events_cached(path)
-    assert user.is_file() and beside.is_dir()
+    assert user.is_file() and str(user).startswith(str(tmp_path / "cache" / "l2e-studio"))
+    assert not beside.exists() and sorted(q.name for q in path.parent.iterdir()) == ["s.dat"]
     np.testing.assert_array_equal(accumulate_events_cached(path), first)
     assert not list(path.parent.glob("*.tmp"))
 

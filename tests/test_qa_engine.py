@@ -11,7 +11,7 @@ import pytest
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.errors import InputError
 from l2e_studio.geometry import Extrinsic
-from l2e_studio.mi import mi_from_joint_histogram
+from l2e_studio.scoring.mi import mi_from_joint_histogram
 from l2e_studio.qa import AXES, guardrails
 from l2e_studio.qa.heldout import Candidate, difference, group_masks, score, split_scenes
 from l2e_studio.qa.landscape import sweep1d, sweep2d, sweeps

@@ -72,7 +72,7 @@ def test_export_cli_writes_each_format_atomically_and_they_read_back(tmp_path, c
     for p in out.iterdir():
         assert fake_result().extrinsic.error_to(load_seed(p))[0] < 1e-6
     full = yaml.safe_load((out / "T_cam_lidar.yaml").read_text())
-    assert full["mi"]["result"] == 0.41 and "direction" in full  # the yaml export is the whole result
+    assert full["score"]["result"] == 0.41 and "direction" in full  # the yaml export is the whole result
 
 
 def test_export_cli_unknown_format_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import datetime as _dt
 import tempfile
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import yaml
@@ -17,12 +18,36 @@ from ..calibrate import CalibrationResult
 from ..camera import CameraModel
 from ..errors import InputError
 from ..atomic import atomic_write_bytes
-from ..export import extrinsic_to_dict, write_result
+from ..export import dumps, extrinsic_to_dict, result_to_dict, write_result
 from ..geometry import Extrinsic
 from ..io.cameras import load_seed
+from .heldout import HeldOutScore, held_out_section
 from .overlay import encode_png
 
 SEED_SUFFIXES = (".yaml", ".yml", ".json", ".txt", ".npy")
+
+
+def default_results_dir(scenes_root: str | Path, cwd: Path | None = None) -> Path:
+    """``./l2e_results/<scene folder name>``: beside where the app runs, never inside the data."""
+    return (cwd or Path.cwd()) / "l2e_results" / Path(scenes_root).resolve().name
+
+
+def check_results_dir(text: str, scenes_root: str | Path) -> tuple[Path | None, str]:
+    """(folder, note) for a results folder typed by hand; folder None when it cannot be one."""
+    text = str(text).strip()
+    if not text:
+        return None, "the results folder cannot be empty"
+    folder = Path(text).expanduser()
+    if not folder.is_absolute():
+        folder = Path.cwd() / folder
+    if folder.exists() and not folder.is_dir():
+        return None, f"{folder} is a file, not a folder"
+    root = Path(scenes_root).resolve()
+    try:
+        folder.resolve().relative_to(root)
+        return folder, f"{folder} is inside the scene folder: results will be written into the data"
+    except ValueError:
+        return folder, ""
 
 
 def fresh_path(folder: Path, stem: str, suffix: str, when: _dt.datetime | None = None) -> Path:
@@ -36,16 +61,27 @@ def fresh_path(folder: Path, stem: str, suffix: str, when: _dt.datetime | None =
 
 
 def save_result(
-    folder: Path, result: CalibrationResult, camera: CameraModel, scenes_dir: Path, before_after: np.ndarray | None
+    folder: Path, result: CalibrationResult, camera: CameraModel, scenes_dir: Path, before_after: np.ndarray | None,
+    held_out: Sequence[HeldOutScore] = (),
 ) -> tuple[Path, Path | None]:
-    """Write the result file (YAML) and, when given, the before/after image beside it."""
+    """Write the result file (YAML) and, when given, the before/after image beside it.
+
+    Held-out scenes (scored, not optimised over) are listed in ``mi.per_scene`` with
+    ``held_out: true`` and by name in ``scenes_held_out``; ``scenes`` stays the optimised ones.
+    """
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(folder, f"cannot create the results folder ({exc.strerror})") from None
     path = fresh_path(folder, "l2e_result", ".yaml")
-    write_result(path, result, camera, scenes_dir)
+    if held_out:
+        doc = result_to_dict(result, camera, scenes_dir)
+        doc["score"]["per_scene"] += held_out_section(held_out)
+        doc["scenes_held_out"] = [r.name for r in held_out]
+        atomic_write_bytes(path, dumps(doc, path), keep_existing=True)
+    else:
+        write_result(path, result, camera, scenes_dir)
     png = None
     if before_after is not None:
         png = path.with_name(path.stem + "_before_after.png")

@@ -23,7 +23,8 @@ from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibr
 from ..geometry import Extrinsic
 from ..scenes import SceneSet
 from .display import SceneDisplay
-from .files import save_result
+from .files import check_results_dir, default_results_dir, save_result
+from .heldout import HeldOutScore, held_out_scores
 from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
@@ -33,6 +34,7 @@ from .panels.scenes import ScenesPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .state import SessionState
+from .text import num
 from .workers import LatestWorker, Ticker
 
 log = logging.getLogger(__name__)
@@ -54,6 +56,7 @@ class App:
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
         self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma)
         self.reading: MiReading | None = None
+        self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self._reference_mi: dict[tuple, float] = {}
         self._cancel: threading.Event | None = None
         self._run_thread: threading.Thread | None = None
@@ -91,12 +94,30 @@ class App:
         return f"http://{shown}:{self.server.get_port()}"
 
     # --- changes from any panel ----------------------------------------------------------------
-    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> None:
-        """Make ``extrinsic`` current and update every view except the one it came from."""
+    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "", values: np.ndarray | None = None) -> None:
+        """Make ``extrinsic`` current (one undo step) and update every view but its source.
+
+        ``values``: the Seed panel's exact six numbers when the change came from there.
+        """
         with self._ui_lock:
-            self.state.set_extrinsic(extrinsic)
-            if source != "sliders":
-                self.extrinsic.show(extrinsic)
+            self.state.set_extrinsic(extrinsic, source)
+            self._show_extrinsic(extrinsic, source, values)
+
+    def undo(self) -> None:
+        with self._ui_lock:
+            ext = self.state.undo()
+            if ext is not None:
+                self._show_extrinsic(ext, "undo")
+
+    def redo(self) -> None:
+        with self._ui_lock:
+            ext = self.state.redo()
+            if ext is not None:
+                self._show_extrinsic(ext, "redo")
+
+    def _show_extrinsic(self, extrinsic: Extrinsic, source: str, values: np.ndarray | None = None) -> None:
+        with self._ui_lock:
+            self.extrinsic.show(extrinsic, values, source)
             if source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
@@ -114,12 +135,22 @@ class App:
 
     def inclusion_changed(self) -> None:
         self.scenes.show_selection()
+        self.optimise.show_start()
         self.mi_worker.poke()
 
     def display_changed(self) -> None:
         """A display control moved (colour, size, opacity, contrast, map)."""
         self.overlay_worker.poke()
         self.compare_worker.poke()
+
+    def compare_changed(self) -> None:
+        """A before/after control moved."""
+        self.compare_worker.poke()
+
+    def follow_changed(self, follow: bool) -> None:
+        """The overlay follows the optimiser's best estimate (and shows the result after) or not."""
+        self.state.set_follow_best(follow)
+        self.overlay_worker.poke()
 
     def sigma_changed(self, sigma: float) -> None:
         self.readout.set_sigma(sigma)
@@ -195,7 +226,12 @@ class App:
         if self._cancel is None or not self.state.snapshot().run.active:
             return False
         self._cancel.set()
+        self.optimise.show_progress(self.state.snapshot().run)  # "Cancelling..." at once
         return True
+
+    def cancel_requested(self) -> bool:
+        """True once Cancel was pressed for the run in progress."""
+        return self._cancel is not None and self._cancel.is_set() and self.state.snapshot().run.active
 
     def wait_run(self, timeout: float = 60.0) -> bool:
         t = self._run_thread
@@ -216,7 +252,8 @@ class App:
         snap = self.state.snapshot()
         self.optimise.show_progress(snap.run)
         self.optimise.show_running(False)
-        self.results.show(snap)
+        self.held_out = self._score_held_out(snap.result)
+        self.results.show(snap, self.held_out)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
@@ -228,15 +265,24 @@ class App:
             verb = "cancelled" if r.cancelled else "finished"
             self.notify_all(
                 f"Optimisation {verb}",
-                f"MI {r.score_seed:.4f} -> {r.score_result:.4f} after {r.evaluations} evaluations "
+                f"MI {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} evaluations "
                 f"({r.seconds:.1f} s). See the Result tab and Before / after.",
                 color="yellow" if r.cancelled else "green",
             )
 
     # --- results ----------------------------------------------------------------------------------
+    def _score_held_out(self, result: CalibrationResult | None) -> list[HeldOutScore]:
+        if result is None:
+            return []
+        try:
+            return held_out_scores(result, self.state.scene_names, self.readout)
+        except Exception:  # a score is not worth losing the result over
+            log.exception("scoring the held-out scenes failed")
+            return []
+
     def accept_result(self) -> None:
-        ext = self.state.accept_result()
-        self.set_extrinsic(ext, source="accept")
+        with self._ui_lock:
+            self._show_extrinsic(self.state.accept_result(), "accept")
 
     def save_result(self) -> tuple[Path, Path | None]:
         """Write the result file and a full-size side-by-side PNG of the selected scene."""
@@ -244,10 +290,22 @@ class App:
         if snap.result is None:
             raise RuntimeError("there is no result to save")
         image = self.compare.compose(snap, mode="side by side", scale=1.0)
-        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image)
+        held = self._score_held_out(snap.result)  # the inclusion may have changed since the run
+        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held)
+
+    def set_out_dir(self, text: str) -> str:
+        """Use the folder ``text`` for results and seeds from now on; returns a note ("" if none).
+
+        Raises ValueError (nothing changes) when ``text`` cannot be a folder."""
+        folder, note = check_results_dir(text, self.scene_set.root)
+        if folder is None:
+            raise ValueError(note)
+        self.out_dir = folder
+        return note
 
     def discard_result(self) -> None:
         self.state.discard_result()
+        self.held_out = []
         self.results.show(self.state.snapshot())
         self.compare_worker.poke()
         self.mi_worker.poke()
@@ -285,7 +343,7 @@ def build_app(
 ) -> App:
     """Start a viser server on ``host:port`` and build the workbench on it."""
     server = viser.ViserServer(host=host, port=port, label=TITLE, verbose=verbose)
-    out = Path(out_dir) if out_dir is not None else Path(scene_set.root) / "results"
+    out = Path(out_dir) if out_dir is not None else default_results_dir(scene_set.root)
     try:
         return App(scene_set, server, out)
     except BaseException:

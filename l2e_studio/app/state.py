@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import Extrinsic
+from .history import History
 
 @dataclass(frozen=True)
 class RunState:
@@ -52,12 +53,16 @@ class Snapshot:
     run: RunState
     result: Any
     follow_best: bool
+    showing_result: bool = False
 
     @property
     def shown_extrinsic(self) -> Extrinsic:
-        """The pose the overlay draws: the best estimate while a run is followed, else ours."""
+        """The pose the overlay draws: the best estimate while a run is followed, the run's
+        result after it (until the extrinsic is changed, accepted or discarded), else ours."""
         if self.run.active and self.follow_best and self.run.best is not None:
             return self.run.best
+        if self.showing_result and self.result is not None:
+            return self.result.extrinsic
         return self.extrinsic
 
 
@@ -73,7 +78,9 @@ class SessionState:
     run: RunState = field(default_factory=RunState)
     result: Any = None  # a calibrate.CalibrationResult once a run finishes
     follow_best: bool = True
+    showing_result: bool = False  # the overlay stays on a run's result until the next change
     version: int = 0
+    history: History = field(default_factory=History, repr=False)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     def __post_init__(self) -> None:
@@ -99,21 +106,43 @@ class SessionState:
                 self.run,
                 self.result,
                 self.follow_best,
+                self.showing_result,
             )
 
     # --- the extrinsic ---------------------------------------------------------------------
-    def set_extrinsic(self, extrinsic: Extrinsic) -> int:
-        """Make ``extrinsic`` the current one; returns the new version."""
+    def set_extrinsic(self, extrinsic: Extrinsic, source: str = "") -> int:
+        """Make ``extrinsic`` the current one (an undo step); returns the new version."""
         with self._lock:
+            if extrinsic is not self.extrinsic:
+                assert self.extrinsic is not None
+                self.history.record(self.extrinsic, source)
             self.extrinsic = extrinsic
+            self.showing_result = False
             return self._bump()
 
     def reset_extrinsic(self) -> Extrinsic:
-        """Back to the file's seed."""
+        """Back to the file's seed (an undo step)."""
         with self._lock:
-            self.extrinsic = self.reference
-            self._bump()
+            self.set_extrinsic(self.reference, "reset")
             return self.reference
+
+    def undo(self) -> Extrinsic | None:
+        """Back one extrinsic change; None when there is nothing to undo."""
+        with self._lock:
+            earlier = self.history.undo(self.extrinsic)
+            if earlier is not None:
+                self.extrinsic, self.showing_result = earlier, False
+                self._bump()
+            return earlier
+
+    def redo(self) -> Extrinsic | None:
+        """Forward one undone change; None when there is nothing to redo."""
+        with self._lock:
+            later = self.history.redo(self.extrinsic)
+            if later is not None:
+                self.extrinsic, self.showing_result = later, False
+                self._bump()
+            return later
 
     # --- scenes ----------------------------------------------------------------------------
     def select(self, index: int) -> int:
@@ -136,6 +165,7 @@ class SessionState:
     def set_follow_best(self, flag: bool) -> int:
         with self._lock:
             self.follow_best = bool(flag)
+            self.showing_result = self.showing_result and self.follow_best
             return self._bump()
 
     # --- the optimisation run ---------------------------------------------------------------
@@ -148,6 +178,7 @@ class SessionState:
                 raise RuntimeError("no scene is included in the optimisation")
             run_id = self.run.run_id + 1
             self.run = RunState(status="running", started=time.time(), run_id=run_id, best=self.extrinsic)
+            self.showing_result = False
             self._bump()
             return run_id
 
@@ -190,6 +221,7 @@ class SessionState:
                                fraction=1.0 if status == "done" else self.run.fraction)
             if result is not None:
                 self.result = result
+                self.showing_result = self.follow_best
             self._bump()
             return True
 
@@ -199,13 +231,13 @@ class SessionState:
         with self._lock:
             if self.result is None:
                 raise RuntimeError("there is no result to accept")
-            self.extrinsic = self.result.extrinsic
-            self._bump()
-            return self.extrinsic
+            self.set_extrinsic(self.result.extrinsic, "accept")
+            return self.result.extrinsic
 
     def discard_result(self) -> None:
         with self._lock:
             self.result = None
+            self.showing_result = False
             self._bump()
 
     def _bump(self) -> int:

@@ -21,8 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=Path, default=None, help="seed extrinsic file (overrides the folder's)")
     parser.add_argument("--camera", type=Path, default=None, help="intrinsics file (overrides the folder's)")
     parser.add_argument("--out", type=Path, default=None,
-                        help="folder for result and seed files (default: SCENES/results; ./l2e_results for the "
-                             "embedded sample, which lives in the source tree)")
+                        help="folder for result and seed files (default: ./l2e_results/<scene folder name>; "
+                             "never inside the scene folder unless given here; changeable in the app)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
                   f"then open http://127.0.0.1:{port}", flush=True)
 
     try:
-        out = args.out if args.out is not None or args.scenes is not None else Path("l2e_results")
-        serve(scene_set, host=args.host, port=args.port, out_dir=out, on_ready=ready)
+        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
     except OSError as exc:
         raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
     return 0

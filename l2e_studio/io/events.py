@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import hashlib
 import io
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..cachedir import user_cache_dir
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import event_prophesee as prophesee
@@ -249,10 +249,11 @@ def _cache_key(path: Path, **params) -> str:
 
 
 def cache_paths(path: Path) -> list[Path]:
-    """Where a map built from ``path`` is cached: beside it, then in the user cache dir."""
-    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "l2e_studio" / "event_maps"
+    """Where a map built from ``path`` is cached: the user cache folder (written), then beside
+    the file (read only: where earlier versions wrote it; the data folder is never written)."""
+    user = user_cache_dir("event_maps")
     digest = hashlib.sha1(str(path.resolve()).encode()).hexdigest()[:16]
-    return [path.with_name(path.name + CACHE_SUFFIX), user / f"{path.name}.{digest}{CACHE_SUFFIX}"]
+    return [user / f"{path.name}.{digest}{CACHE_SUFFIX}", path.with_name(path.name + CACHE_SUFFIX)]
 
 
 def accumulate_events_cached(
@@ -277,9 +278,7 @@ def accumulate_events_cached(
                 return cached
     image = accumulate_events(path, window_s, start_s, hot_pixel_sigma, width, height)
     if use_cache:
-        for cpath in cache_paths(path):
-            if _write_cache(cpath, key, image):
-                break
+        _write_cache(cache_paths(path)[0], key, image)  # best effort
     return image
 
 

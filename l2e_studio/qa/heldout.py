@@ -153,7 +153,7 @@ def score(
     pooled = {g: np.zeros(C) for g in masks}
     for i, c in enumerate(candidates):
         joints = stack.joint_histograms(c.extrinsic, per_scene=True)
-        from ..mi import mi_from_joint_histogram
+        from ..scoring.mi import mi_from_joint_histogram
 
         per[i] = [mi_from_joint_histogram(j) for j in joints]
         counts[i] = joints.sum(axis=(1, 2)).astype(np.int64)

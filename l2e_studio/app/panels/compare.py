@@ -7,18 +7,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..context import Workbench
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
+from ..text import num
 
 if TYPE_CHECKING:
-    from ..server import App
     from .overlay_view import OverlayPanel
 
 NO_RESULT = "No result yet: run the optimisation (Optimise tab) to compare the seed with the result."
 
 
 class ComparePanel:
-    def __init__(self, app: "App", overlay: "OverlayPanel") -> None:
+    def __init__(self, app: Workbench, overlay: "OverlayPanel") -> None:
         self.app = app
         self.overlay = overlay
         gui = app.server.gui
@@ -30,8 +31,8 @@ class ComparePanel:
             self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="side by side")
             self.amount = gui.add_slider("Swipe / blend", 0.0, 1.0, 0.01, 0.5,
                                          hint="Swipe: where the seed ends and the result begins; blend: share of the result")
-        self.mode.on_update(lambda _: app.compare_worker.poke())
-        self.amount.on_update(lambda _: app.compare_worker.poke())
+        self.mode.on_update(lambda _: app.compare_changed())
+        self.amount.on_update(lambda _: app.compare_changed())
         self.frames = 0
 
     def compose(self, snap: Snapshot, mode: str | None = None, scale: float = 0.5) -> np.ndarray | None:
@@ -55,12 +56,12 @@ class ComparePanel:
         name = self.app.state.scene_names[snap.selected]
         try:
             k = list(r.scene_names).index(name)
-            scores = f"MI of this scene {r.score_seed_per_scene[k]:.4f} (seed) -> {r.score_result_per_scene[k]:.4f} (result)"
+            scores = f"MI of this scene {num(r.score_seed_per_scene[k])} (seed) -> {num(r.score_result_per_scene[k])} (result)"
         except ValueError:  # held out of the optimisation: score it with the readout's stack
             everything = [True] * len(self.app.state.scene_names)
             score_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
             mi_res = self.app.readout.read(r.extrinsic, everything).per_scene[snap.selected]
-            scores = f"held out of the optimisation; MI {score_seed:.4f} (seed) -> {mi_res:.4f} (result)"
+            scores = f"held out of the optimisation; MI {num(score_seed)} (seed) -> {num(mi_res)} (result)"
         self.caption.content = f"**{name}**: {scores}"
         self.image.image = img
         self.image.visible = True

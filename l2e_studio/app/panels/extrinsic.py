@@ -3,20 +3,19 @@ the live MI readout of the selected scene and of the included scenes."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import viser
 
+from ..context import Workbench
 from ...errors import InputError
 from ...geometry import Extrinsic
+from ..browser_js import KEY_HANDLING_HTML, hide_slider_boxes
+from ..exact import centred_range, format_value, is_partial, nudged, parse_number
 from ..files import save_seed, seed_document, seed_from_upload
 from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_extrinsic
 from ..readout import MiReading
 from ..state import Snapshot
-
-if TYPE_CHECKING:
-    from ..server import App
+from ..text import num
 
 #: Step choices: (metres, degrees).
 STEPS = {
@@ -24,34 +23,50 @@ STEPS = {
     "fine: 1 mm / 0.1°": (0.001, 0.1),
     "finest: 0.1 mm / 0.01°": (0.0001, 0.01),
 }
-TRANSLATION_RANGE = 0.5  # m either side of the file seed (re-centred when a value leaves it)
-ROTATION_RANGE = 30.0  # deg either side of zero correction
+SLIDER_PRECISION = 9  # decimals the sliders keep: never rounded to a grid
 
 HELP = (
     "x, y, z: translation of T_cam_lidar (m, camera frame). roll, pitch, yaw: correction to the "
-    "file seed's rotation (deg) about the camera's forward / left / up axes."
+    "file seed's rotation (deg) about the camera's forward / left / up axes. Type or paste exact "
+    "values in the = fields; − / + nudge by one step; sliders span ±100 steps around the value."
 )
 
 
+def _step_label(delta: float, rotation: bool) -> str:
+    if rotation:
+        return f"{format_value(delta, 3)}°"
+    return f"{format_value(delta * 1000, 3)} mm"
+
+
 class ExtrinsicPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         self.reference = app.state.reference
-        values = sliders_from_extrinsic(app.state.reference, self.reference)
+        self.values = sliders_from_extrinsic(app.state.reference, self.reference)
         gui.add_markdown(HELP)
         self.step = gui.add_dropdown("Step", tuple(STEPS), initial_value="fine: 1 mm / 0.1°")
+        self.history = gui.add_button_group("Edit", ("Undo", "Redo"),
+                                            hint="Undo / redo extrinsic changes (Ctrl+Z, Ctrl+Shift+Z)")
         self.sliders: list[viser.GuiSliderHandle] = []
+        self.fields: list[viser.GuiTextHandle] = []
+        self.nudges: list[viser.GuiButtonGroupHandle] = []
         for i, name in enumerate(SLIDER_NAMES):
-            if i < 3:
-                c = float(self.reference.translation[i])
-                s = gui.add_slider(f"{name} (m)", round(c - TRANSLATION_RANGE, 2), round(c + TRANSLATION_RANGE, 2),
-                                   0.001, float(values[i]), hint=f"T_cam_lidar translation {name}, metres")
-            else:
-                s = gui.add_slider(f"{name} (°)", -ROTATION_RANGE, ROTATION_RANGE, 0.1, float(values[i]),
-                                   hint=f"{name} correction to the file seed, degrees")
-            s.on_update(self._on_slider)
+            unit = "m" if i < 3 else "°"
+            what = f"T_cam_lidar translation {name}, metres" if i < 3 else f"{name} correction to the file seed, degrees"
+            s = gui.add_slider(f"{name} ({unit})", float(self.values[i]) - 1, float(self.values[i]) + 1, 0.001,
+                               float(self.values[i]), hint=what + " (drag: ±100 steps)")
+            s.precision = SLIDER_PRECISION
+            f = gui.add_text(f"{name} =", format_value(self.values[i]), hint=what + ": type or paste an exact value")
+            b = gui.add_button_group(f"{name} ±", ("−", "+"), hint=f"Nudge {name} by one step")
+            s.on_update(lambda event, i=i: self._on_slider(event, i))
+            f.on_update(lambda event, i=i: self._on_typed(event, i))
+            b.on_click(lambda event, i=i: self._on_nudge(event, i))
             self.sliders.append(s)
+            self.fields.append(f)
+            self.nudges.append(b)
+        gui.add_html(hide_slider_boxes([s._impl.uuid for s in self.sliders]) + KEY_HANDLING_HTML)
+        self.note = gui.add_markdown("", visible=False)
         self.readout = gui.add_markdown("MI: computing...")
         self.pose_text = gui.add_markdown("")
         self.reset = gui.add_button("Reset to file seed", icon=viser.Icon.ARROW_BACK_UP,
@@ -61,23 +76,62 @@ class ExtrinsicPanel:
         self.save = gui.add_button("Save seed", icon=viser.Icon.DEVICE_FLOPPY,
                                    hint="Write the current extrinsic as a seed file in the results folder")
         self.step.on_update(lambda _: self._apply_step())
+        self.history.on_click(lambda event: app.undo() if self.history.value == "Undo" else app.redo())
         self.reset.on_click(lambda event: app.set_extrinsic(app.state.reset_extrinsic(), source="reset"))
         self.load.on_upload(self._on_upload)
         self.save.on_click(self._on_save)
         self._apply_step()
 
     # --- events ---------------------------------------------------------------------------
-    def _on_slider(self, event) -> None:
+    def step_of(self, i: int) -> float:
+        metres, degrees = STEPS[self.step.value]
+        return metres if i < 3 else degrees
+
+    def _set_value(self, i: int, value: float, source: str) -> None:
+        """Axis ``i`` takes exactly ``value``; the others keep theirs."""
+        values = self.values.copy()
+        values[i] = value
+        self.app.set_extrinsic(extrinsic_from_sliders(values, self.reference), source=source, values=values)
+
+    def _on_slider(self, event, i: int) -> None:
         if event.client is None:  # our own programmatic update
             return
-        values = np.array([s.value for s in self.sliders], dtype=np.float64)
-        self.app.set_extrinsic(extrinsic_from_sliders(values, self.reference), source="sliders")
+        self._set_value(i, float(self.sliders[i].value), "sliders")
+
+    def _on_typed(self, event, i: int) -> None:
+        if event.client is None:
+            return
+        text = self.fields[i].value
+        value = parse_number(text)
+        if value is None:
+            self._show_note("" if is_partial(text) else f"{SLIDER_NAMES[i]}: “{text}” is not a number; "
+                            "the value stays " + format_value(self.values[i]))
+            return
+        self._show_note("")
+        if value != self.values[i]:
+            self._set_value(i, value, "typed")
+
+    def _on_nudge(self, event, i: int) -> None:
+        sign = -1.0 if self.nudges[i].value.startswith("−") else 1.0
+        self._set_value(i, nudged(self.values[i], sign * self.step_of(i)), "nudge")
+
+    def _show_note(self, text: str) -> None:
+        self.note.content = f"⚠ {text}" if text else ""
+        self.note.visible = bool(text)
 
     def _apply_step(self) -> None:
-        metres, degrees = STEPS[self.step.value]
         for i, s in enumerate(self.sliders):
-            s.step = metres if i < 3 else degrees
-            s.precision = 4 if i < 3 and metres < 0.001 else (3 if i < 3 else (2 if degrees < 0.1 else 1))
+            s.step = self.step_of(i)
+            label = _step_label(self.step_of(i), rotation=i >= 3)
+            self.nudges[i].options = (f"− {label}", f"+ {label}")
+        self._centre_sliders()
+
+    def _centre_sliders(self) -> None:
+        """Each slider spans ±100 steps around its value (so it narrows with the step)."""
+        for i, s in enumerate(self.sliders):
+            lo, hi = centred_range(self.values[i], self.step_of(i), rotation=i >= 3)
+            s.min, s.max = lo, hi
+            s.value = float(self.values[i])
 
     def _on_upload(self, event) -> None:
         upload = self.load.value
@@ -101,15 +155,22 @@ class ExtrinsicPanel:
         self.app.notify(event.client, "Seed saved", str(path), color="green")
 
     # --- refresh from the state ------------------------------------------------------------
-    def show(self, extrinsic: Extrinsic) -> None:
-        """Move the sliders to ``extrinsic`` (widening a slider's range if it falls outside)."""
-        current = np.array([s.value for s in self.sliders], dtype=np.float64)
-        values = sliders_from_extrinsic(extrinsic, self.reference, near=current)
-        for s, v in zip(self.sliders, values):
-            if not s.min <= v <= s.max:
-                half = (s.max - s.min) / 2
-                s.min, s.max = float(np.floor((v - half) * 100) / 100), float(np.ceil((v + half) * 100) / 100)
-            s.value = float(v)
+    def show(self, extrinsic: Extrinsic, values: np.ndarray | None = None, source: str = "") -> None:
+        """Show ``extrinsic``: exact ``values`` when the change came from this panel, else derived.
+
+        The field being typed in is left alone (rewriting it would fight the keyboard), and a
+        slider being dragged keeps its range; every other change re-centres the sliders.
+        """
+        if values is None:
+            values = sliders_from_extrinsic(extrinsic, self.reference, near=self.values)
+        self.values = np.asarray(values, dtype=np.float64).copy()
+        for i, f in enumerate(self.fields):
+            if source == "typed" and parse_number(f.value) == self.values[i]:
+                continue
+            f.value = format_value(self.values[i])
+        if source == "sliders":
+            return
+        self._centre_sliders()
 
     def show_pose_text(self, extrinsic: Extrinsic) -> None:
         err_deg, err_m = self.reference.error_to(extrinsic)
@@ -124,7 +185,7 @@ class ExtrinsicPanel:
         n_in = sum(snap.included)
         delta = reading.total - reference_mi
         self.readout.content = (
-            f"**MI · {name}: {reading.per_scene[snap.selected]:.4f}**  \n"
-            f"**MI · {n_in} included scenes: {reading.total:.4f}** "
-            f"({delta:+.4f} vs file seed)"
+            f"**MI · {name}: {num(reading.per_scene[snap.selected])}**  \n"
+            f"**MI · {n_in} included scenes: {num(reading.total)}** "
+            f"({num(delta, signed=True)} vs file seed)"
         )

@@ -7,40 +7,52 @@ The run itself is :func:`l2e_studio.calibrate.calibrate` in a worker thread (see
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
-
 import numpy as np
 import viser
 import viser.uplot
 
+from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
+from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
+from ..exact import format_value
 from ..pose import describe
+from ..text import num
 from ..state import RunState
 
-if TYPE_CHECKING:
-    from ..server import App
-
 IDLE_TEXT = "Idle. Start optimises the included scenes from the current extrinsic."
+STATUS_WORDS = {
+    "running": "**Running**",
+    "done": "✓ **Finished**",
+    "cancelled": "■ **Cancelled**: the best point so far, not a converged result",
+    "failed": "✗ **Failed**",
+    "idle": "**Idle**",
+}
 
 
 class OptimisePanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         defaults = CalibrationSettings()
         self.method = gui.add_dropdown("Optimiser", METHODS, initial_value=defaults.method,
                                        hint="SLSQP is fastest; L-BFGS-B and Powell are robust")
-        self.t_bound = gui.add_number("± translation (m)", defaults.translation_bound, min=0.0, max=2.0, step=0.01,
-                                      hint="Search bound per axis around the start, metres")
-        self.r_bound = gui.add_number("± rotation (°)", defaults.rotation_bound_deg, min=0.1, max=45.0, step=0.5,
-                                      hint="Search bound per axis around the start, degrees")
-        self.sigma_in = gui.add_number("Smoothing σ (px)", defaults.sigma, min=0.0, max=50.0, step=0.5,
-                                       hint="Gaussian smoothing of the event maps (the paper uses 5 px)")
+        # Text fields, checked on the server: a number box would clamp or drop what is typed.
+        self.t_bound = gui.add_text("± translation (m)", format_value(defaults.translation_bound),
+                                    hint="Search bound per axis around the start, metres: (0, 2]")
+        self.t_problem = gui.add_markdown("", visible=False)
+        self.r_bound = gui.add_text("± rotation (°)", format_value(defaults.rotation_bound_deg),
+                                    hint="Search bound per axis around the start, degrees: (0, 45]")
+        self.r_problem = gui.add_markdown("", visible=False)
+        self.sigma_in = gui.add_text("Smoothing σ (px)", format_value(defaults.sigma),
+                                     hint="Gaussian smoothing of the event maps in pixels, (0, 50]; the paper uses 5")
+        self.s_problem = gui.add_markdown("", visible=False)
+        self._sigma = float(defaults.sigma)
         self.rotation_only = gui.add_checkbox("Rotation only", defaults.rotation_only,
                                               hint="Keep the translation fixed; search the rotation only")
         self.coarse = gui.add_checkbox("Coarse to fine", defaults.coarse_to_fine,
                                        hint="Start on wider smoothing and fewer points: a wider basin")
         self.start = gui.add_button("Start", color="green", icon=viser.Icon.PLAYER_PLAY)
+        self.blocker = gui.add_markdown("", visible=False)
         self.cancel = gui.add_button("Cancel", color="red", icon=viser.Icon.PLAYER_STOP, disabled=True)
         self.follow = gui.add_checkbox("Overlay follows best", True,
                                        hint="While running, draw the optimiser's best estimate in the overlay")
@@ -62,19 +74,53 @@ class OptimisePanel:
         )
         self.best_text = gui.add_markdown("")
         self.start.on_click(self._on_start)
-        self.cancel.on_click(lambda event: app.cancel_run())
-        self.follow.on_update(lambda _: (app.state.set_follow_best(self.follow.value), app.overlay_worker.poke()))
-        self.sigma_in.on_update(lambda _: app.sigma_changed(self.sigma()))
+        self.cancel.on_click(self._on_cancel)
+        self.follow.on_update(lambda _: app.follow_changed(bool(self.follow.value)))
+        for handle in (self.t_bound, self.r_bound, self.sigma_in):
+            handle.on_update(lambda _: self.check())
+        self.check()
 
     def sigma(self) -> float:
-        return float(self.sigma_in.value)
+        """The last valid smoothing sigma (the readout and the smoothed map view use it)."""
+        return self._sigma
+
+    def checked(self) -> tuple[Checked, Checked, Checked]:
+        return (check_translation_bound(self.t_bound.value), check_rotation_bound(self.r_bound.value),
+                check_sigma(self.sigma_in.value))
+
+    def check(self) -> list[str]:
+        """Show each field's problem beside it, follow a valid sigma, and enable Start or say why not."""
+        results = self.checked()
+        for c, note in zip(results, (self.t_problem, self.r_problem, self.s_problem)):
+            note.content = f"⚠ {c.problem}" if c.problem else ""
+            note.visible = bool(c.problem)
+        sigma = results[2].value
+        if sigma is not None and sigma != self._sigma:
+            self._sigma = sigma
+            self.app.sigma_changed(sigma)
+        problems = [c.problem for c in results if c.problem]
+        self.show_start(problems)
+        return problems
+
+    def show_start(self, problems: list[str] | None = None) -> None:
+        """Start is enabled only when a run can start; otherwise the reason shows below it."""
+        if problems is None:
+            problems = [c.problem for c in self.checked() if c.problem]
+        snap = self.app.state.snapshot()
+        reason = start_blocker(sum(snap.included), problems, snap.run.active)
+        self.start.disabled = bool(reason)
+        self.blocker.content = f"Start is disabled: {reason}." if reason and not snap.run.active else ""
+        self.blocker.visible = bool(self.blocker.content)
 
     def settings(self) -> CalibrationSettings:
+        t, r, sigma = self.checked()
+        if not (t.ok and r.ok and sigma.ok):
+            raise ValueError("; ".join(c.problem for c in (t, r, sigma) if c.problem))
         return CalibrationSettings(
             method=self.method.value,
-            translation_bound=float(self.t_bound.value),
-            rotation_bound_deg=float(self.r_bound.value),
-            sigma=self.sigma(),
+            translation_bound=float(t.value),
+            rotation_bound_deg=float(r.value),
+            sigma=float(sigma.value),
             rotation_only=bool(self.rotation_only.value),
             coarse_to_fine=bool(self.coarse.value),
         )
@@ -85,12 +131,17 @@ class OptimisePanel:
         except (RuntimeError, ValueError) as exc:
             self.app.notify(event.client, "Cannot start", str(exc), color="red")
 
+    def _on_cancel(self, event) -> None:
+        if self.app.cancel_run():
+            self.cancel.disabled = True
+            self.status.content = "**Cancelling...** the optimiser stops at its next evaluation and keeps its best point"
+
     def show_running(self, running: bool) -> None:
-        self.start.disabled = running
         self.cancel.disabled = not running
         for handle in (self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only, self.coarse):
             handle.disabled = running
         self.progress.animated = running
+        self.show_start()
 
     def show_progress(self, run: RunState) -> None:
         self.progress.value = float(np.clip(100.0 * run.fraction, 0.0, 100.0))
@@ -100,9 +151,12 @@ class OptimisePanel:
             self.plot.visible = True
         elapsed = (run.finished or time.time()) - run.started if run.started else 0.0
         stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
-        words = {"running": "Running", "done": "Finished", "cancelled": "Cancelled", "failed": "Failed", "idle": "Idle"}
-        text = (f"**{words[run.status]}** · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n"
-                f"objective MI {run.mi:.4f} · best {run.best_mi:.4f}")
+        if run.active and self.app.cancel_requested():
+            head = "**Cancelling...**"
+        else:
+            head = STATUS_WORDS[run.status]
+        text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n"
+                f"objective MI {num(run.mi)} · best {num(run.best_mi)}")
         if run.error:
             text += f"  \n{run.error}"
         self.status.content = text

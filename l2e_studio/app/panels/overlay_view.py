@@ -3,17 +3,14 @@ projected at the current extrinsic, and the display controls."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from ..context import Workbench
 from ..display import MAP_MODES
 from ..overlay import COLOR_MODES, OverlayStyle, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
-
-if TYPE_CHECKING:
-    from ..server import App
+from ..text import num
 
 JPEG_QUALITY = 80
 PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
@@ -22,7 +19,7 @@ PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and t
 class OverlayPanel:
     """A dockable panel with two tabs: the live overlay and (filled by ComparePanel) before/after."""
 
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         cam = app.camera
@@ -62,7 +59,7 @@ class OverlayPanel:
         )
 
     def base_image(self, index: int, style: OverlayStyle) -> np.ndarray:
-        sigma = self.app.optimise.sigma()
+        sigma = self.app.readout.sigma
         return self.app.displays[index].base(style.contrast, self.map_mode.value, sigma)
 
     def draw(self, index: int, extrinsic, style: OverlayStyle | None = None) -> np.ndarray:
@@ -78,10 +75,14 @@ class OverlayPanel:
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]
-        mi = "" if reading is None else f" · MI {reading.per_scene[snap.selected]:.4f}"
+        mi = "" if reading is None else f" · MI {num(reading.per_scene[snap.selected])}"
+        if snap.showing_result and snap.result is not None and not snap.run.active:
+            mi += " at your extrinsic"  # the reading is of the current extrinsic, not of the result shown
         note = ""
         if snap.run.active and snap.follow_best:
             note = " · showing the optimiser's best estimate"
+        elif snap.showing_result and snap.result is not None:
+            note = " · showing the last run's result: accept it in Result, or change the extrinsic to see yours"
         elif snap.result is not None and not np.allclose(snap.result.extrinsic.params, snap.extrinsic.params):
             note = " · a result is waiting: compare it in Before / after, accept it in Result"
         self.caption.content = f"**{name}**{mi}{note}"

@@ -3,22 +3,22 @@ the new seed or discard it, and save the result file with a before/after image."
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Sequence
 
 import viser
 
+from ..context import Workbench
 from ...errors import InputError
+from ..heldout import HeldOutScore
 from ..pose import describe
+from ..text import num
 from ..state import Snapshot
-
-if TYPE_CHECKING:
-    from ..server import App
 
 NO_RESULT = "No result yet."
 
 
 class ResultPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         self.summary = gui.add_markdown(NO_RESULT)
@@ -26,12 +26,25 @@ class ResultPanel:
                                      hint="Make the result the current extrinsic (the next run starts there)")
         self.discard = gui.add_button("Discard", icon=viser.Icon.TRASH, disabled=True)
         self.save = gui.add_button("Save result", icon=viser.Icon.DEVICE_FLOPPY, disabled=True,
-                                   hint=f"Write a result file and a before/after PNG into {app.out_dir}")
+                                   hint="Write a result file and a before/after PNG into the results folder")
         self.saved = gui.add_markdown("")
+        self.folder = gui.add_text("Results folder", str(app.out_dir),
+                                   hint="Where result files and seeds are written (created on the first save)")
+        self.folder_note = gui.add_markdown("", visible=False)
+        self.folder.on_update(self._on_folder)
         self.table = gui.add_markdown("")
         self.accept.on_click(self._accept)
         self.discard.on_click(lambda event: app.discard_result())
         self.save.on_click(self._on_save)
+        self._saved_for: object | None = None  # the result the "Saved ..." line is about
+
+    def _on_folder(self, event) -> None:
+        try:
+            note = self.app.set_out_dir(self.folder.value)
+        except ValueError as exc:
+            note = f"{exc}; still writing to {self.app.out_dir}"
+        self.folder_note.content = f"⚠ {note}" if note else ""
+        self.folder_note.visible = bool(note)
 
     def _accept(self, event) -> None:
         self.app.accept_result()
@@ -39,35 +52,55 @@ class ResultPanel:
                         color="green")
 
     def _on_save(self, event) -> None:
+        result = self.app.state.snapshot().result
         try:
             path, png = self.app.save_result()
         except (InputError, OSError, RuntimeError) as exc:
             self.app.notify(event.client, "Result not saved", str(exc), color="red")
             return
         body = f"{path}" + (f" and {png}" if png else "")
+        self._saved_for = result
         self.saved.content = f"Saved `{path}`" + (f"  \nand `{png}`" if png else "")
         self.app.notify(event.client, "Result saved", body, color="green")
 
-    def show(self, snap: Snapshot) -> None:
+    def show(self, snap: Snapshot, held_out: Sequence[HeldOutScore] = ()) -> None:
         r = snap.result
         has = r is not None
         self.accept.disabled = not has
         self.discard.disabled = not has
         self.save.disabled = not has
+        if r is not self._saved_for:  # never a "Saved ..." line about another result
+            self.saved.content = ""
+            self._saved_for = None
         if not has:
             self.summary.content = NO_RESULT
             self.table.content = ""
             return
+        cancelled = bool(r.cancelled)
+        # A cancelled run's point is not a converged result: no green "go" styling for it.
+        self.accept.color = "yellow" if cancelled else "green"
+        self.accept.label = "Accept best-so-far as seed" if cancelled else "Accept as seed"
         err_deg, err_m = r.seed.error_to(r.extrinsic)
-        state = "cancelled (best point so far)" if r.cancelled else "finished"
+        state = ("■ **Run cancelled**: the best point so far, not a converged result" if cancelled
+                 else "✓ **Run finished**")
         self.summary.content = (
-            f"**Run {state}** · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
-            f"**MI {r.score_seed:.4f} → {r.score_result:.4f}** ({r.score_result - r.score_seed:+.4f}) over "
-            f"{len(r.scene_names)} scenes  \n"
+            f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
+            f"**MI {num(r.score_seed)} → {num(r.score_result)}** ({num(r.score_result - r.score_seed, signed=True)}) over "
+            f"{len(r.scene_names)} scenes" + (f", {len(held_out)} held out" if held_out else "") + "  \n"
             f"moved {err_deg:.3f}° / {100 * err_m:.2f} cm from its seed  \n"
             f"{describe(r.extrinsic, self.app.state.reference)}"
         )
-        rows = ["| scene | MI seed | MI result | Δ |", "|:--|--:|--:|--:|"]
-        for name, a, b in zip(r.scene_names, r.score_seed_per_scene, r.score_result_per_scene):
-            rows.append(f"| {name} | {a:.4f} | {b:.4f} | {b - a:+.4f} |")
-        self.table.content = "\n".join(rows)
+        self.table.content = result_table(r, held_out)
+
+
+def result_table(result, held_out: Sequence[HeldOutScore] = ()) -> str:
+    """Markdown: one row per optimised scene, then the held-out ones marked as such."""
+    rows = ["| scene | MI seed | MI result | Δ |", "|:--|--:|--:|--:|"]
+    for name, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene):
+        rows.append(f"| {name} | {num(a)} | {num(b)} | {num(b - a, signed=True)} |")
+    for h in held_out:
+        rows.append(f"| {h.name} (held out) | {num(h.score_seed)} | {num(h.score_result)} | "
+                    f"{num(h.score_result - h.score_seed, signed=True)} |")
+    if held_out:
+        rows += ["", "Held-out scenes were not optimised over: their MI checks the result on unseen data."]
+    return "\n".join(rows)

@@ -3,16 +3,13 @@ see every scene's MI at the current extrinsic and the scenes that failed to load
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from ..context import Workbench
 from ..readout import MiReading
-
-if TYPE_CHECKING:
-    from ..server import App
+from ..text import num
 
 
 class ScenesPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         ss = app.scene_set
@@ -60,7 +57,7 @@ class ScenesPanel:
                 "| | scene | points | MI now |", "|:-:|:--|--:|--:|"]
         for i, name in enumerate(self.app.state.scene_names):
             mark = "✓" if snap.included[i] else "–"
-            mi = "" if reading is None else f"{reading.per_scene[i]:.4f}"
+            mi = "" if reading is None else num(reading.per_scene[i])
             label = f"**{name}**" if i == snap.selected else name
             rows.append(f"| {mark} | {label} | {self.app.scene_set.scenes[i].points.shape[0]} | {mi} |")
         return "\n".join(rows)
@@ -68,6 +65,6 @@ class ScenesPanel:
     def _failures(self) -> str:
         ss = self.app.scene_set
         lines = ["**Not loaded:**", ""]
-        lines += [f"- ❌ `{f.name}`: {f.error}" for f in ss.failures]
-        lines += [f"- ⚠️ {u}" for u in ss.unpaired]
+        lines += [f"- ✗ `{f.name}`: {f.error}" for f in ss.failures]
+        lines += [f"- ⚠ {u}" for u in ss.unpaired]
         return "\n".join(lines)

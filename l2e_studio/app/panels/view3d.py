@@ -4,14 +4,11 @@ the same extrinsic as the sliders."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
+import viser
 
+from ..context import Workbench
 from ...geometry import Extrinsic
-
-if TYPE_CHECKING:
-    from ..server import App
 
 FRUSTUM_SCALE = 0.6  # m
 GIZMO_SCALE = 0.9
@@ -31,7 +28,7 @@ def extrinsic_from_pose(wxyz: np.ndarray, position: np.ndarray) -> Extrinsic:
 
 
 class View3D:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: Workbench) -> None:
         self.app = app
         scene = app.server.scene
         cam = app.camera
@@ -50,6 +47,20 @@ class View3D:
         self.shown_scene = 0
         self.gizmo.on_update(self._on_gizmo)
         self._place_viewer(app.state.reference, points)
+        self.reset_view = app.server.gui.add_button(
+            "Reset 3D view", icon=viser.Icon.HOME, hint="Put the 3D view back behind the camera, looking along it")
+        self.reset_view.on_click(lambda event: self.reset_viewpoint())
+
+    def reset_viewpoint(self) -> None:
+        """Every tab's 3D viewpoint back to the start-up one."""
+        ic = self.app.server.initial_camera
+        for client in self.app.server.get_clients().values():
+            try:
+                client.camera.up_direction = ic.up
+                client.camera.position = ic.position
+                client.camera.look_at = ic.look_at
+            except Exception:  # a tab closing right now
+                continue
 
     def _place_viewer(self, extrinsic: Extrinsic, points: np.ndarray) -> None:
         """Start the browser's viewpoint behind and above the camera, looking along it."""

@@ -1,0 +1,234 @@
+"""The workbench as a precision instrument, in a real browser (headless Debian Chromium).
+
+Typed and pasted values kept exactly (negatives included), nudges that never snap to a grid,
+undo/redo by button and keyboard, keys on a focused control that leave the 3D view alone,
+the reset-view button. Same fixtures as ``test_app_browser.py``.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+from app_fixtures import screenshot, wait_for
+from l2e_studio.app.pose import extrinsic_from_sliders
+from test_app_browser import app, browser, context, exact_field, open_tab, page, scene_set, slider_root  # noqa: F401
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(240)]
+
+
+def values(app) -> np.ndarray:
+    return app.extrinsic.values.copy()
+
+
+def current(app):
+    return app.state.snapshot().extrinsic
+
+
+def test_typed_negatives_and_pasted_values_are_kept_exactly(page, app):
+    open_tab(page, "Seed")
+    x = exact_field(page, "x")
+    x.fill("")
+    x.type("-0.1234")  # key by key, as a person types: "-", "-0", "-0.", ...
+    wait_for(lambda: current(app).translation[0] == -0.1234, what="x = -0.1234 exactly")
+    assert x.input_value() == "-0.1234"
+    roll = exact_field(page, "roll")
+    roll.fill("")
+    roll.type("-0.5")
+    wait_for(lambda: values(app)[3] == -0.5, what="roll = -0.5 exactly")
+    assert roll.input_value() == "-0.5"
+    # a pasted value with more digits than any step
+    yaw = exact_field(page, "yaw")
+    yaw.fill("-1.726354")
+    wait_for(lambda: values(app)[5] == -1.726354, what="yaw pasted")
+    expected = extrinsic_from_sliders(values(app), app.state.reference)
+    assert np.allclose(current(app).params, expected.params, atol=1e-12)
+    # something that is no number is refused with a message, and nothing changes
+    before = current(app)
+    yaw.fill("abc")
+    page.get_by_text("is not a number").first.wait_for()
+    assert current(app) is before
+    screenshot(page, "10_typed_negatives")
+
+
+def test_nudges_move_by_one_step_without_snapping_to_a_grid(page, app):
+    open_tab(page, "Seed")
+    yaw = exact_field(page, "yaw")
+    yaw.fill("-1.726")  # an optimiser-like value between grid points
+    wait_for(lambda: values(app)[5] == -1.726, what="yaw typed")
+    page.get_by_role("button", name="+ 0.1°").nth(2).click()  # roll, pitch, yaw: the third
+    wait_for(lambda: values(app)[5] == pytest.approx(-1.626, abs=1e-12), what="yaw nudged up")
+    page.get_by_role("button", name="− 0.1°").nth(2).click()
+    page.get_by_role("button", name="− 0.1°").nth(2).click()
+    wait_for(lambda: values(app)[5] == pytest.approx(-1.826, abs=1e-12), what="yaw nudged down twice")
+    wait_for(lambda: yaw.input_value() == "-1.826", what="the field follows")
+    # the slider spans +-100 steps around the value, and narrows with the step
+    s = app.extrinsic.sliders[5]
+    assert s.min == pytest.approx(-11.826) and s.max == pytest.approx(8.174)
+    x0 = values(app)[0]
+    labelled_step = page.locator("label", has_text="Step").first.get_attribute("for")
+    page.locator(f"[id='{labelled_step}']").click()
+    page.get_by_role("option", name="finest: 0.1 mm / 0.01°").click()
+    wait_for(lambda: app.extrinsic.sliders[0].step == 0.0001, what="finest step")
+    assert app.extrinsic.sliders[0].max - app.extrinsic.sliders[0].min == pytest.approx(0.02)
+    page.get_by_role("button", name="+ 0.1 mm").first.click()
+    wait_for(lambda: values(app)[0] == pytest.approx(x0 + 0.0001, abs=1e-12), what="x nudged by 0.1 mm")
+    screenshot(page, "11_nudged")
+
+
+def test_undo_and_redo_by_button_and_keyboard(page, app):
+    open_tab(page, "Seed")
+    ref = current(app)
+    steps = []
+    for k in range(55):  # more than 50 separate changes
+        app.extrinsic.nudges[0].value = "+ 1 mm"  # runs the click callback, as a click on x's "+ 1 mm"
+        steps.append(current(app))
+    assert app.state.history.depth[0] >= 55
+    page.get_by_role("button", name="Undo").click()
+    wait_for(lambda: current(app) is steps[-2], what="one undo by button")
+    page.get_by_text("Edit").first.click()  # focus leaves the fields
+    page.keyboard.press("Control+z")
+    wait_for(lambda: current(app) is steps[-3], what="one undo by Ctrl+Z")
+    page.keyboard.press("Control+Shift+z")
+    wait_for(lambda: current(app) is steps[-2], what="one redo by Ctrl+Shift+Z")
+    for _ in range(54):  # steps[-2] is steps[53]: 54 more undos reach the start
+        app.undo()
+    assert current(app) is ref
+    page.get_by_role("button", name="Redo").click()
+    wait_for(lambda: current(app) is steps[0], what="redo by button")
+    wait_for(lambda: exact_field(page, "x").input_value() != "", what="fields follow")
+    screenshot(page, "12_undo_redo")
+
+
+def test_keys_on_a_focused_slider_leave_the_3d_view_alone_and_reset_view(page, app):
+    open_tab(page, "Seed")
+    client = wait_for(lambda: next(iter(app.server.get_clients().values()), None), what="a client")
+    pos0 = np.array(client.camera.position)
+    thumb = slider_root(page, "yaw (°)").get_by_role("slider")
+    thumb.focus()
+    for _ in range(5):
+        page.keyboard.down("ArrowLeft")
+        time.sleep(0.1)
+        page.keyboard.up("ArrowLeft")
+    wait_for(lambda: values(app)[5] == pytest.approx(-0.5, abs=1e-9), what="the slider took the keys")
+    time.sleep(0.5)
+    assert np.allclose(client.camera.position, pos0, atol=1e-6), "the 3D view moved"
+    # the reset-view button puts a moved view back
+    client.camera.position = tuple(pos0 + np.array([3.0, -2.0, 1.0]))
+    wait_for(lambda: not np.allclose(client.camera.position, pos0, atol=1e-3), what="the view to move")
+    page.get_by_role("button", name="Reset 3D view").click()
+    wait_for(lambda: np.allclose(client.camera.position, app.server.initial_camera.position, atol=1e-3),
+             what="the view back at its start")
+
+
+def text_field(page, label: str):
+    """The input of a viser text field with exactly this label."""
+    lab = page.locator("label").filter(has_text=re.compile(rf"^{re.escape(label)}$")).first
+    return lab.locator("xpath=ancestor::div[1]/..//input")
+
+
+def test_meaningless_settings_are_refused_beside_the_field_and_start_says_why(page, app):
+    open_tab(page, "Optimise")
+    start = page.get_by_role("button", name="Start")
+    assert start.is_enabled()
+    for label, bad, words in (("± translation (m)", "-0.1", "outside (0, 2] m"),
+                              ("± rotation (°)", "500", "500 ° is outside (0, 45]"),
+                              ("Smoothing σ (px)", "0", "outside (0, 50] px"),
+                              ("Smoothing σ (px)", "nan", "is not a number")):
+        field = text_field(page, label)
+        good = field.input_value()
+        field.fill(bad)
+        page.get_by_text(words).first.wait_for()
+        wait_for(lambda: not start.is_enabled(), what=f"Start disabled for {label} = {bad}")
+        page.get_by_text("Start is disabled: fix the settings").first.wait_for()
+        assert field.input_value() == bad  # kept as typed: never clamped
+        screenshot(page, "13_refused_input")
+        field.fill(good)
+        wait_for(lambda: start.is_enabled(), what="Start enabled again")
+    with pytest.raises(ValueError):
+        app.optimise.t_bound.value = "-0.1"
+        app.optimise.settings()
+    app.optimise.t_bound.value = "0.2"
+    # nothing to run on: no scene included
+    open_tab(page, "Scenes")
+    page.get_by_role("button", name="none").click()
+    open_tab(page, "Optimise")
+    page.get_by_text("no scene is included").first.wait_for()
+    assert not start.is_enabled()
+
+
+def test_held_out_scenes_are_in_the_result_table_and_file_and_saved_text_is_never_stale(page, app):
+    app.state.set_included(1, False)  # scene_001 held out
+    app.inclusion_changed()
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    r = app.state.snapshot().result
+    assert "scene_001" not in r.scene_names
+    # the overlay stays on the result once the run is over
+    assert app.state.snapshot().shown_extrinsic is r.extrinsic
+    page.get_by_text("showing the last run's result").first.wait_for()
+    open_tab(page, "Result")
+    page.get_by_role("cell", name="scene_001 (held out)").wait_for()
+    assert "nan" not in page.locator("body").inner_text().lower()
+    screenshot(page, "14_held_out_rows")
+    page.get_by_role("button", name="Save result").click()
+    page.get_by_text("Saved").first.wait_for()
+    doc = yaml.safe_load(next(app.out_dir.glob("l2e_result_*.yaml")).read_text())
+    held = [e for e in doc["score"]["per_scene"] if e.get("held_out")]
+    assert [e["scene"] for e in held] == ["scene_001"] and doc["scenes_held_out"] == ["scene_001"]
+    assert np.isfinite(held[0]["seed"]) and np.isfinite(held[0]["result"])
+    page.get_by_role("button", name="Discard").click()
+    wait_for(lambda: app.results.saved.content == "", what="the Saved line to go with its result")
+    assert page.get_by_text("Saved `").count() == 0
+
+
+def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(page, app, monkeypatch):
+    import l2e_studio.app.server as server_module
+
+    real = server_module.calibrate
+
+    def slow_to_stop(*args, **kwargs):  # an optimiser that takes 1.5 s to wind down after a cancel
+        result = real(*args, **kwargs)
+        time.sleep(1.5)
+        return result
+
+    monkeypatch.setattr(server_module, "calibrate", slow_to_stop)
+    app.optimise.method.value = "Nelder-Mead"
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    wait_for(lambda: app.state.snapshot().run.evaluations >= 10, timeout=60, what="the run to get going")
+    t0 = time.monotonic()
+    page.get_by_role("button", name="Cancel").click()
+    page.get_by_text("Cancelling...").first.wait_for(timeout=2_000)
+    shown_after = time.monotonic() - t0
+    assert shown_after < 1.0, f"'Cancelling...' appeared after {shown_after:.2f} s"
+    assert app.state.snapshot().run.status == "running"  # still winding down: the text is honest
+    page.get_by_text("Cancelled").first.wait_for(timeout=20_000)
+    screenshot(page, "15_cancelled")
+    open_tab(page, "Result")
+    accept = page.get_by_role("button", name="Accept best-so-far as seed")
+    accept.wait_for()
+    assert app.results.accept.color != "green"
+    page.get_by_text("Run cancelled").first.wait_for()
+
+
+def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
+    open_tab(page, "Result")
+    field = text_field(page, "Results folder")
+    assert field.input_value() == str(app.out_dir)
+    elsewhere = tmp_path / "elsewhere"
+    field.fill(str(elsewhere))
+    wait_for(lambda: app.out_dir == elsewhere, what="the new results folder")
+    inside = app.scene_set.root / "results"
+    field.fill(str(inside))
+    page.get_by_text("is inside the scene folder").first.wait_for()
+    assert app.out_dir == inside  # allowed when asked, with a warning
+    field.fill("")
+    page.get_by_text("cannot be empty").first.wait_for()
+    assert app.out_dir == inside

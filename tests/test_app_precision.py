@@ -1,0 +1,151 @@
+"""Unit tests of the workbench's precision tools: undo/redo, exact number parsing, slider
+ranges, settings checks (no browser, no server)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from l2e_studio.app.history import History
+from l2e_studio.app.state import SessionState
+from l2e_studio.geometry import Extrinsic
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_history_keeps_at_least_fifty_steps_and_redoes_them():
+    h: History[int] = History(limit=200, clock=Clock())
+    current = 0
+    for v in range(1, 61):  # 60 separate changes ("nudge" never merges)
+        h.record(current, "nudge")
+        current = v
+    for expected in range(59, -1, -1):
+        current = h.undo(current)
+        assert current == expected
+    assert h.undo(current) is None
+    for expected in range(1, 61):
+        current = h.redo(current)
+        assert current == expected
+    assert h.redo(current) is None
+
+
+def test_history_merges_a_drag_burst_and_a_new_change_drops_redo():
+    clock = Clock()
+    h: History[int] = History(merge_seconds=0.5, clock=clock)
+    for v in range(5):  # one slider drag: 5 updates 0.1 s apart
+        h.record(v, "sliders")
+        clock.t += 0.1
+    assert h.depth == (1, 0)
+    clock.t += 2.0
+    h.record(5, "sliders")  # a new drag after a pause
+    assert h.depth == (2, 0)
+    assert h.undo(6) == 5 and h.depth == (1, 1)
+    h.record(5, "typed")
+    assert h.depth == (2, 0)
+
+
+def test_session_state_undo_covers_every_kind_of_change():
+    ref = Extrinsic(np.zeros(3), np.zeros(3))
+    st = SessionState(["a"], reference=ref)
+    a = ref.perturbed([0.01, 0, 0], [0, 0, 0])
+    b = ref.perturbed([0.02, 0, 0], [0, 0, 0])
+    st.set_extrinsic(a, "nudge")
+    st.set_extrinsic(b, "file")
+    st.reset_extrinsic()
+    assert st.snapshot().extrinsic is ref
+    assert st.undo() is b and st.undo() is a and st.undo() is ref and st.undo() is None
+    assert st.redo() is a and st.snapshot().extrinsic is a
+    st.result = type("R", (), {"extrinsic": b})()
+    st.accept_result()
+    assert st.snapshot().extrinsic is b and st.undo() is a
+    with pytest.raises(RuntimeError):
+        SessionState(["a"], reference=ref).accept_result()
+
+
+def test_parse_number_takes_every_value_and_refuses_the_rest():
+    from l2e_studio.app.exact import format_value, is_partial, parse_number
+
+    assert parse_number("-0.1234") == -0.1234
+    assert parse_number(" −0,5 ") == -0.5  # a pasted minus sign and a decimal comma
+    assert parse_number("1e-4") == 1e-4 and parse_number("+3") == 3.0
+    for bad in ("", "-", "abc", "nan", "inf", "1..2"):
+        assert parse_number(bad) is None
+    assert all(is_partial(t) for t in ("", "-", "+", "1e-", "-."))
+    assert not is_partial("abc") and not is_partial("nan")
+    assert format_value(-0.1234) == "-0.1234" and format_value(-1e-9) == "0" and format_value(2.0) == "2"
+
+
+def test_centred_range_narrows_with_the_step():
+    from l2e_studio.app.exact import centred_range, nudged
+
+    assert centred_range(-1.726, 0.1, rotation=True) == pytest.approx((-11.726, 8.274))
+    assert centred_range(0.0, 1.0, rotation=True) == (-90.0, 90.0)  # capped
+    assert centred_range(0.05, 0.0001) == pytest.approx((0.04, 0.06))
+    assert nudged(-1.726, 0.1) == pytest.approx(-1.626, abs=1e-15)
+
+
+def test_settings_checks_refuse_instead_of_clamping():
+    from l2e_studio.app.checks import check_rotation_bound, check_sigma, check_translation_bound, start_blocker
+
+    assert check_translation_bound("0.2").value == 0.2
+    for bad, words in (("-0.1", "outside"), ("0", "Rotation only"), ("3", "outside"), ("nan", "not a number")):
+        c = check_translation_bound(bad)
+        assert c.value is None and words in c.problem
+    assert check_rotation_bound("500").value is None and "500" in check_rotation_bound("500").problem
+    assert check_rotation_bound("45").value == 45.0
+    assert check_sigma("0").value is None and check_sigma("NaN").value is None and check_sigma("2.5").value == 2.5
+    assert "no scene is included" in start_blocker(0, [], False)
+    assert start_blocker(3, ["x"], False) and start_blocker(3, [], True) and start_blocker(3, [], False) == ""
+
+
+def test_numbers_never_read_nan():
+    from l2e_studio.app.text import num
+
+    assert num(float("nan")) == "—" and num(None) == "—" and num(float("inf")) == "—"
+    assert num(0.12345) == "0.1235" and num(0.1, signed=True) == "+0.1000"
+
+
+def test_state_shows_the_result_after_a_run_until_the_extrinsic_changes():
+    from types import SimpleNamespace
+
+    ref = Extrinsic(np.zeros(3), np.zeros(3))
+    st = SessionState(["a"], reference=ref)
+    run = st.begin_run()
+    best = ref.perturbed([0.01, 0, 0], [0, 0, 0])
+    st.finish_run(run, SimpleNamespace(extrinsic=best, cancelled=False))
+    assert st.snapshot().shown_extrinsic is best and st.snapshot().extrinsic is ref
+    st.set_extrinsic(ref.perturbed([0, 0.01, 0], [0, 0, 0]), "nudge")
+    assert st.snapshot().shown_extrinsic is st.snapshot().extrinsic
+
+
+def test_scan_cache_lives_in_the_user_cache_dir_not_the_data_folder(tmp_path, monkeypatch):
+    from app_fixtures import write_small_scenes
+    from l2e_studio.scenes import load_scene_folder
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    folder = write_small_scenes(tmp_path / "data", n_scenes=2)
+    before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
+    load_scene_folder(folder)
+    load_scene_folder(folder)  # second load: from the cache
+    assert sorted(p.relative_to(folder) for p in folder.rglob("*")) == before
+    cached = list((tmp_path / "cache" / "l2e-studio" / "scans").rglob("*.npy"))
+    assert len(cached) == 2
+
+
+def test_panels_never_import_the_server_module():
+    import ast
+    from pathlib import Path
+
+    import l2e_studio.app.panels as panels
+
+    for path in Path(panels.__file__).parent.glob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                assert not (node.module or "").endswith("server"), f"{path.name} imports {node.module}"
