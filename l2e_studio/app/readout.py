@@ -15,6 +15,7 @@ import numpy as np
 
 from ..camera import CameraModel
 from ..geometry import Extrinsic
+from ..scoring import objective_for
 from ..objective import SceneStack
 from ..scenes import Scene
 
@@ -35,13 +36,16 @@ class MiReading:
 
 
 class MiReadout:
-    """Evaluates MI for the GUI; a lock orders reads against sigma changes."""
+    """Evaluates the calibration score for the GUI (the objective the optimiser climbs: the
+    paper's MI for event maps, the edge score for camera images); a lock orders reads against
+    sigma changes."""
 
     def __init__(self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0) -> None:
         self._lock = threading.Lock()
         self._stack = SceneStack.build(
             scenes, camera, sigma, reference=reference,
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
+            objective=objective_for(sc.map_kind for sc in scenes),
         )
 
     @property
@@ -61,5 +65,5 @@ class MiReadout:
         """MI of each scene and of the ``included`` scenes' histograms pooled together."""
         mask = np.asarray(included, dtype=bool)
         with self._lock:
-            total, per_scene = self._stack.mi(extrinsic, pooled=mask)
+            total, per_scene = self._stack.score(extrinsic, pooled=mask)
         return MiReading(extrinsic, float(total), np.asarray(per_scene, float), tuple(bool(b) for b in mask))

@@ -102,7 +102,7 @@ def sweep1d(stack: SceneStack, centre: Extrinsic, axis: str | int, span: float, 
     for i, v in enumerate(offs):
         if cancel is not None and cancel.is_set():
             break
-        vals[i] = stack.mi(_offset(centre, k, v), per_scene=False)[0]
+        vals[i] = stack.score(_offset(centre, k, v), per_scene=False)[0]
     return Sweep1D(AXES[k], offs, vals)
 
 
@@ -131,5 +131,5 @@ def sweep2d(stack: SceneStack, centre: Extrinsic, axis_a: str | int, axis_b: str
             d = np.zeros(6)
             d[a] = va if a < 3 else np.radians(va)
             d[b] = vb if b < 3 else np.radians(vb)
-            vals[i, j] = stack.mi(centre.perturbed(d[:3], d[3:]), per_scene=False)[0]
+            vals[i, j] = stack.score(centre.perturbed(d[:3], d[3:]), per_scene=False)[0]
     return Sweep2D((AXES[a], AXES[b]), (oa, ob), vals)

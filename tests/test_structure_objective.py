@@ -1,0 +1,133 @@
+"""The structure-aware objective, map kinds from content, and the verdict (issue: trustworthy
+calibrations on real recordings)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
+from l2e_studio.camera import CameraModel
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.io.maps import load_map, looks_like_photo
+from l2e_studio.objective import EdgeObjective, SceneStack
+from l2e_studio.scenes import Scene
+from l2e_studio.scoring import objective_for
+from l2e_studio.verdict import judge
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from realdata_rigs import load_rigs, perturbations  # noqa: E402
+
+
+def _box_world(rng: np.random.Generator) -> tuple[Scene, CameraModel, Extrinsic]:
+    """Boxes in front of a wall, seen by a camera whose image is a rendering of the boxes' edges."""
+    cam = CameraModel(np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]]), 640, 480)
+    truth = Extrinsic.from_matrix(np.array([[0, -1, 0, 0.05], [0, 0, -1, -0.1], [1, 0, 0, 0.02], [0, 0, 0, 1.0]]))
+    pts, inten = [], []
+    az = np.radians(np.arange(-40, 40, 0.15))
+    for el in np.radians(np.arange(-25, 25, 0.8)):
+        for a in az:
+            d = np.array([np.cos(el) * np.cos(a), np.cos(el) * np.sin(a), np.sin(el)])
+            r = 12.0
+            for cx, cy, half, depth in ((0.0, 2.0, 1.0, 6.0), (0.0, -2.5, 0.8, 8.0), (0.0, 0.5, 0.5, 4.0)):
+                # a box face at x = depth spanning y in cy +- half, z in +-half
+                t = depth / max(d[0], 1e-6)
+                y, z = t * d[1], t * d[2]
+                if abs(y - cy) < half and abs(z) < half and t < r:
+                    r = t
+            pts.append(r * d)
+            inten.append(200.0 if r < 12 else 40.0)
+    P = np.array(pts, dtype=np.float32)
+    inten = np.array(inten, dtype=np.float32) + rng.normal(0, 3, len(P)).astype(np.float32)
+    # the image: mid-grey wall, bright boxes, textured noise; plus a saturated "sky" band
+    uv = cam.K @ truth.transform(P).T
+    uv = (uv[:2] / uv[2]).T
+    img = np.full((480, 640), 90.0, np.float32)
+    near = inten > 120
+    for (u, v) in uv[near].astype(int):
+        if 0 <= u < 640 and 0 <= v < 480:
+            cv2.circle(img, (u, v), 3, 170.0, -1)
+    img += rng.normal(0, 4, img.shape).astype(np.float32)
+    img[:40] = 255.0
+    return Scene("boxes", P, np.clip(inten, 0, 255), np.clip(img, 0, 255), "image"), cam, truth
+
+
+def test_edge_objective_gradient_matches_finite_differences() -> None:
+    scene, cam, truth = _box_world(np.random.default_rng(0))
+    stack = SceneStack.build([scene], cam, 3.0, objective="edges")
+    obj = stack.objective(truth)
+    assert isinstance(obj, EdgeObjective)
+    delta = np.array([0.01, -0.02, 0.03, 0.004, -0.006, 0.003])
+    _, g = obj.value_and_grad(delta)
+    for k, h in enumerate([1e-4] * 3 + [1e-5] * 3):
+        e = np.zeros(6)
+        e[k] = h
+        fd = (obj.value(delta + e) - obj.value(delta - e)) / (2 * h)
+        assert g[k] == pytest.approx(fd, rel=0.05, abs=2e-3 * max(1.0, abs(fd))), (k, g[k], fd)
+
+
+def test_edges_objective_moves_towards_the_truth_and_the_verdict_never_hands_back_worse() -> None:
+    scene, cam, truth = _box_world(np.random.default_rng(1))
+    seed = truth.perturbed(np.array([0.03, -0.02, 0.0]), np.radians([1.0, -1.0, 0.5]))
+    settings = CalibrationSettings()
+    stack = stack_scenes([scene], cam, seed, settings)
+    assert stack.objective_name == "edges"
+    result = calibrate(stack, None, seed, settings)
+    deg, _ = result.extrinsic.error_to(truth)
+    assert deg < 0.5 * seed.error_to(truth)[0]
+    verdict = judge(stack, result, settings)
+    # whatever the verdict, what it hands back is never further from the truth than the seed
+    assert verdict.extrinsic.error_to(truth)[0] <= seed.error_to(truth)[0] + 1e-9
+
+
+def test_objective_follows_the_map_kind() -> None:
+    assert objective_for(["events", "events"]) == "mi"
+    assert objective_for(["events", "image"]) == "edges"
+    assert objective_for(["image"], "mi") == "mi"
+    with pytest.raises(ValueError):
+        objective_for(["image"], "nope")
+
+
+def test_a_photo_under_event_is_read_as_an_image(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    photo = cv2.GaussianBlur(rng.uniform(20, 250, (120, 160)).astype(np.float32), (0, 0), 2)
+    events = np.zeros((120, 160), np.float32)
+    events[rng.integers(0, 120, 3000), rng.integers(0, 160, 3000)] = rng.integers(1, 60, 3000)
+    (tmp_path / "event").mkdir()
+    cv2.imwrite(str(tmp_path / "event" / "a.png"), np.clip(photo * 1.0, 0, 255).astype(np.uint8))
+    cv2.imwrite(str(tmp_path / "event" / "b.png"), events.astype(np.uint8))
+    assert looks_like_photo(photo) and not looks_like_photo(events)
+    assert load_map(tmp_path / "event" / "a.png")[1] == "image"
+    assert load_map(tmp_path / "event" / "b.png")[1] == "events"
+    assert load_map(tmp_path / "event" / "a.png", kind="events")[1] == "events"
+
+
+@pytest.mark.realdata
+def test_real_street_scenes_never_end_worse_than_the_seed() -> None:
+    """OpenCalib scene 3 (a real 64-beam lidar and a 1920x1200 camera): from seeds 2 deg / 10 cm
+    off, what the tool hands back is never further from the reference than the seed; the
+    paper's MI alone, which this replaces, ends degrees away and the verdict catches it."""
+    rigs = load_rigs(["3"])
+    if not rigs:
+        pytest.skip("../shared/realdata is absent")
+    rig = rigs[0]
+    settings = CalibrationSettings()
+    for dt, dr in perturbations(2, 2.0, 0.10, 7):
+        seed = rig.reference.perturbed(dt, dr)
+        stack = stack_scenes(rig.scenes, rig.camera, seed, settings)
+        result = calibrate(stack, None, seed, settings)
+        verdict = judge(stack, result, settings)
+        s_deg, s_m = seed.error_to(rig.reference)
+        e_deg, e_m = verdict.extrinsic.error_to(rig.reference)
+        assert e_deg <= s_deg + 0.1 and e_m <= s_m + 0.01, (verdict.status, e_deg, e_m)
+    # the MI of intensity against grey is pulled away on this street scene: not trusted, seed kept
+    mi = CalibrationSettings(objective="mi", global_search=False)
+    stack = stack_scenes(rig.scenes, rig.camera, seed, mi)
+    result = calibrate(stack, None, seed, mi)
+    verdict = judge(stack, result, mi)
+    if result.extrinsic.error_to(rig.reference)[0] > s_deg + 0.1:
+        assert verdict.status != "trusted" and verdict.kept_seed, verdict.checks
