@@ -94,7 +94,8 @@ def test_objective_follows_the_map_kind() -> None:
 
 def test_a_photo_under_event_is_read_as_an_image(tmp_path: Path) -> None:
     rng = np.random.default_rng(3)
-    photo = cv2.GaussianBlur(rng.uniform(20, 250, (120, 160)).astype(np.float32), (0, 0), 2)
+    ramp = np.linspace(30, 230, 160, dtype=np.float32)[None, :].repeat(120, axis=0)  # shading
+    photo = ramp + cv2.GaussianBlur(rng.normal(0, 20, (120, 160)).astype(np.float32), (0, 0), 2)
     events = np.zeros((120, 160), np.float32)
     events[rng.integers(0, 120, 3000), rng.integers(0, 160, 3000)] = rng.integers(1, 60, 3000)
     (tmp_path / "event").mkdir()
