@@ -4,6 +4,7 @@
     python benchmarks/bench_engine.py --runs 5            # quicker
     python benchmarks/bench_engine.py --scaling           # + cost versus scene count (5..80)
     python benchmarks/bench_engine.py --cli               # + the whole `l2e-studio calibrate` process
+    python benchmarks/bench_engine.py --realism           # the harder synthetic mode (synth --realism)
 
 The synthetic dataset (the paper's sensors: 1280x720 event map, ~75k lidar points per scan) is
 written once to ``benchmarks/out/synth<N>`` and reused. Seeds follow the paper's protocol: the
@@ -26,15 +27,16 @@ from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.geometry import Extrinsic
 from l2e_studio.scenes import load_scene_folder
 from l2e_studio.synth import SynthConfig, config_with, read_truth, write_dataset
+from l2e_studio.verdict import judge
 
 OUT = Path(__file__).resolve().parent / "out"
 
 
-def dataset(n: int) -> Path:
-    folder = OUT / f"synth{n}"
+def dataset(n: int, realism: bool = False) -> Path:
+    folder = OUT / (f"synth{n}" + ("_realism" if realism else ""))
     if not (folder / "truth.yaml").is_file():
         t = time.perf_counter()
-        write_dataset(folder, config_with(SynthConfig(), n_scenes=n), overwrite=True)
+        write_dataset(folder, config_with(SynthConfig(), n_scenes=n, realism=realism), overwrite=True)
         print(f"wrote {n} synthetic scenes to {folder} in {time.perf_counter() - t:.1f} s")
     return folder
 
@@ -69,9 +71,10 @@ def main() -> None:
     ap.add_argument("--method", default="SLSQP")
     ap.add_argument("--scaling", action="store_true")
     ap.add_argument("--cli", action="store_true")
+    ap.add_argument("--realism", action="store_true", help="the harder synthetic mode")
     args = ap.parse_args()
 
-    folder = dataset(args.scenes)
+    folder = dataset(args.scenes, args.realism)
     truth = read_truth(folder / "truth.yaml")
     scene_set, cold, warm = load(folder)
     print(f"load {args.scenes} scenes: {cold:.2f} s from text, {warm:.2f} s from the cache")
@@ -83,7 +86,7 @@ def main() -> None:
     print(f"one MI evaluation (paper estimator, all scenes pooled): {1000 * timed(lambda: stack.mi(truth, per_scene=False)):.1f} ms")
     print(f"  with per-scene MI as well: {1000 * timed(lambda: stack.mi(truth)):.1f} ms")
     zero = np.zeros(6)
-    final_budget = settings.schedule(stack.camera.width)[-1].max_points
+    final_budget = settings.schedule(stack.camera.width, stack.camera.height)[-1].max_points
     for label, budget in (("every point in the image", None), ("the final stage's budget", final_budget)):
         obj = stack.objective(truth, max_points=budget)
         print(f"smooth objective, {label} ({obj.stack.n_points} points): value {1000 * timed(lambda: obj.value(zero)):.1f} ms, "
@@ -94,18 +97,23 @@ def main() -> None:
     for i in range(args.runs):
         seed = perturbed_seed(truth, rng)
         res = calibrate(stack, None, seed, settings)
+        verdict = judge(stack, res, settings)
         deg, m = res.extrinsic.error_to(truth)
         ok = deg <= 0.1 and m <= 0.01
-        rows.append((deg, m, res.seconds, res.evaluations, ok))
+        rows.append((deg, m, res.seconds, res.evaluations, res.seconds + verdict.seconds, ok, verdict.status))
         sdeg, sm = seed.error_to(truth)
         print(f"run {i:2d}: seed {sdeg:5.2f} deg {100 * sm:5.1f} cm -> {deg:.4f} deg {1000 * m:5.2f} mm  "
-              f"{res.evaluations:3d} evals {res.seconds:5.2f} s  {'ok' if ok else 'MISS'}", flush=True)
-    a = np.array([r[:4] for r in rows])
-    n_ok = sum(r[4] for r in rows)
+              f"{res.evaluations:3d} evals {res.seconds:5.2f} s  {'ok' if ok else 'MISS'}  verdict {verdict.status} "
+              f"({verdict.seconds:.2f} s){'' if verdict.trusted else ': ' + '; '.join(verdict.reasons)}", flush=True)
+    a = np.array([r[:5] for r in rows])
+    n_ok = sum(r[5] for r in rows)
+    trusted = sum(r[6] == "trusted" for r in rows)
     print(f"\naccuracy: {n_ok}/{len(rows)} runs within 0.1 deg and 1 cm; rotation error median {np.median(a[:, 0]):.4f} "
           f"max {a[:, 0].max():.4f} deg; translation error median {1000 * np.median(a[:, 1]):.2f} max {1000 * a[:, 1].max():.2f} mm")
     print(f"optimisation wall time: median {np.median(a[:, 2]):.2f} s, max {a[:, 2].max():.2f} s; "
           f"evaluations median {np.median(a[:, 3]):.0f}")
+    print(f"optimisation + verdict: median {np.median(a[:, 4]):.2f} s, max {a[:, 4].max():.2f} s; "
+          f"verdict trusted {trusted}/{len(rows)}")
     print(f"peak memory (max RSS) so far: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
     if args.scaling:

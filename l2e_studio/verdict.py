@@ -39,6 +39,7 @@ AGREE_M = 0.03  # ... in rotation and in translation
 EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distance (at 1280 px wide)
 SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
 MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
+REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
 
 
 @dataclass(frozen=True)
@@ -194,10 +195,15 @@ def judge(
     if not failed:
         return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0)
     if all(c.name.endswith("(translation)") for c in failed):
+        # keep the seed's translation, re-fit the rotation to it (close to the checked one), and
+        # hand it back only if the scenes and both halves still prefer it to the seed
         refit = calibrate(final, None, Extrinsic(res.rotvec, seed.translation),
-                          replace(settings, rotation_only=True, coarse_to_fine=False, global_search=False),
-                          cancel=cancel).extrinsic
+                          replace(settings, rotation_only=True, coarse_to_fine=False, global_search=False,
+                                  rotation_bound_deg=REFIT_BOUND_DEG), cancel=cancel).extrinsic
         refit = Extrinsic(refit.rotvec, seed.translation)
-        return Verdict("trusted-rotation", refit, False, reasons, tuple(checks), time.perf_counter() - t0)
+        if all(final.select(m).score(refit, per_scene=False)[0] > final.select(m).score(seed, per_scene=False)[0]
+               for m in (a, b)):
+            return Verdict("trusted-rotation", refit, False, reasons, tuple(checks), time.perf_counter() - t0)
+        reasons += ("with the seed's translation kept, the re-fitted rotation no longer beats the seed on both halves",)
     keep = on_untrusted == "keep-seed"
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)

@@ -113,7 +113,7 @@ def test_synth_and_write_lidar_txt_write_atomically(tmp_path: Path, monkeypatch)
         written.append(Path(path).name)
         return real(path, data, keep_existing)
 
-    for module in ("l2e_studio.synth", "l2e_studio.io.lidar"):
+    for module in ("l2e_studio.synth.dataset", "l2e_studio.io.lidar"):
         monkeypatch.setattr(f"{module}.atomic_write_bytes", spy)
     write_dataset(tmp_path / "s", config_with(SynthConfig(), n_scenes=1, width=160, height=90, points_per_scan=500))
     assert {"scene_000.txt", "scene_000.png", "camera.yaml", "truth.yaml", "config.json"} <= set(written)

@@ -23,7 +23,7 @@ from l2e_studio.synth import (
     read_truth,
     write_dataset,
 )
-from l2e_studio.synth_world import Box, Decal, cast, surface
+from l2e_studio.synth.world import Box, Decal, cast, surface
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets" / "sample"
 SMALL = SynthConfig(n_scenes=3, width=320, height=180, points_per_scan=6000, seed=3)

@@ -25,6 +25,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed-error-deg", type=float, help="rotation error of the written seed extrinsic (default: 2)")
     p.add_argument("--seed-error-m", type=float, help="translation error of the written seed extrinsic (default: 0.05)")
     p.add_argument("--no-distortion", action="store_true", help="an ideal pinhole camera (default: small radtan distortion)")
+    p.add_argument("--camera-image", action="store_true",
+                   help="write grey camera images (under image/) instead of accumulated event maps")
+    p.add_argument("--realism", action="store_true",
+                   help="reproduce real data's failure modes: shading, saturated sky, unrelated texture and foliage for "
+                        "camera images; range fall-off, flickering lamps, blooming, hot pixels and an occluded band for "
+                        "event maps")
+    p.add_argument("--traps", help="only some failure modes, comma-separated (see --realism)")
+    p.add_argument("--dim", action="store_true", help="a dim cloud: intensities 0..14 (the sparse-cloud trap)")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder (old scene_* files are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -41,7 +49,9 @@ def config_from_args(args: argparse.Namespace):
                          seed=args.seed, seed_error_deg=args.seed_error_deg, seed_error_m=args.seed_error_m)
     if args.no_distortion:
         config = config_with(config, distortion=False)
-    return config
+    traps = tuple(t.strip() for t in args.traps.split(",") if t.strip()) if args.traps else None
+    return config_with(config, map_kind="image" if args.camera_image else None, realism=args.realism or None,
+                       traps=traps, intensity_scale=0.055 if args.dim else None)
 
 
 def run(args: argparse.Namespace) -> int:

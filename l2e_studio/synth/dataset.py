@@ -31,12 +31,13 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from .atomic import atomic_write_bytes
-from .camera import CameraModel
-from .errors import InputError
-from .geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
-from .synth_layout import make_layout
-from .synth_world import cast, surface
+from ..atomic import atomic_write_bytes
+from ..camera import CameraModel
+from ..errors import InputError
+from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
+from .layout import make_layout
+from .realism import SKY_RANGE_M, TRAPS, camera_image, event_traps, sky_mask
+from .world import cast, surface
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,10 @@ class SynthConfig:
     dead_pixels: int = 40
     checkerboard_fraction: float = 0.4  # share of scenes with calibration targets near the rig
     falloff_exponent: float = 2.0  # spot light at the camera ~ 1 / distance**falloff_exponent
+    map_kind: str = "events"  # "events": accumulated laser-return events; "image": a grey camera image
+    realism: bool = False  # every failure mode of real data for the map kind (realism.TRAPS)
+    traps: tuple[str, ...] = ()  # or some of them, by name
+    intensity_scale: float = 1.0  # < 1: a dim cloud (0.055 gives the 0..14 intensities of a sparse-cloud trap)
 
     def __post_init__(self) -> None:
         if self.n_scenes < 1 or self.width < 16 or self.height < 16 or self.points_per_scan < 100:
@@ -77,6 +82,19 @@ class SynthConfig:
             raise ValueError("seed errors must be >= 0")
         if not 0 <= self.camera_offset_m[0] <= self.camera_offset_m[1]:
             raise ValueError("camera_offset_m must be an increasing (min, max) pair of distances")
+        if self.map_kind not in TRAPS:
+            raise ValueError(f"map_kind must be one of {', '.join(TRAPS)}")
+        unknown = set(self.traps) - set(TRAPS[self.map_kind])
+        if unknown:
+            raise ValueError(f"unknown {self.map_kind} trap(s) {', '.join(sorted(unknown))}; "
+                             f"expected some of {', '.join(TRAPS[self.map_kind])}")
+        if not 0 < self.intensity_scale <= 1:
+            raise ValueError("intensity_scale must be in (0, 1]")
+
+    @property
+    def active_traps(self) -> tuple[str, ...]:
+        """The failure modes this dataset reproduces (all of the map kind's with ``realism``)."""
+        return TRAPS[self.map_kind] if self.realism else tuple(self.traps)
 
 
 #: The embedded sample (``assets/sample``): six small scenes.
@@ -162,14 +180,21 @@ def make_scene(
     returned = retro | (rng.random(raw.size) < 1.0 - np.exp(-raw / 2e-5))
     reflectivity = np.where(retro, 215.0 + 40.0 * (surf.rho - 1.15) / 0.3, 200.0 * diffuse * (0.45 + 0.55 * cos_l))
     reflectivity *= 1.0 - 0.002 * hits.t  # a mild range dependence left by the sensor's correction
-    intensity = np.clip(np.round(reflectivity + rng.normal(0, config.intensity_noise, raw.size)), 0, 255)
+    intensity = np.clip(np.round(config.intensity_scale * (reflectivity + rng.normal(0, config.intensity_noise, raw.size))), 0, 255)
+    if "sky" in config.active_traps:
+        # the sky returns nothing, and what lies just below it (far, weakly lit) returns dimly
+        returned &= ~sky_mask(hits.t, surf.normals)
+        intensity = np.where(hits.t > 0.5 * SKY_RANGE_M, np.round(0.3 * intensity), intensity)
     sigma_r = config.range_noise_m * (1.0 + hits.t / 40.0)
     ranges = hits.t + rng.normal(size=hits.t.size) * sigma_r
     points = dirs_l * ranges[:, None]
 
-    # --- event camera -----------------------------------------------------------------------
-    true_lidar = dirs_l * hits.t[:, None]  # spots are where the pulses really hit
-    event_map = _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng)
+    # --- the camera: accumulated events of the laser spots, or a grey image of the world -------
+    if config.map_kind == "image":
+        event_map = camera_image(camera, truth, layout.lidar_R, layout.lidar_pos, boxes, config.active_traps, rng)
+    else:
+        true_lidar = dirs_l * hits.t[:, None]  # spots are where the pulses really hit
+        event_map = _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng)
 
     return points[returned].astype(np.float32), intensity[returned].astype(np.float32), event_map
 
@@ -192,7 +217,9 @@ def _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng) -> n
     rho = surf.rho[idx]
     cos_c = np.abs(np.einsum("ij,ij->i", surf.normals[idx], view))
     gain = np.where(rho > 1.0, 12.0 * rho, rho)  # retro-reflectors shine back at the rig
-    light = gain * cos_c / dist**config.falloff_exponent * rng.uniform(0.8, 1.25)  # per-scene contrast sensitivity
+    traps = config.active_traps
+    falloff = config.falloff_exponent + (1.5 if "falloff" in traps else 0.0)
+    light = gain * cos_c / dist**falloff * rng.uniform(0.8, 1.25)  # per-scene contrast sensitivity
     u, v = uv[idx, 0], uv[idx, 1]
     iu, iv = np.round(u).astype(np.int64), np.round(v).astype(np.int64)
     off = np.arange(-pad, pad + 1)
@@ -205,8 +232,10 @@ def _event_map(config, camera, truth, layout, boxes, true_lidar, surf, rng) -> n
     inside = (px >= 0) & (px < w) & (py >= 0) & (py < h) & (rate > 1e-3)
     lam = np.bincount((py * w + px)[inside], weights=rate[inside], minlength=w * h)
     lam += config.background_rate
+    lam = event_traps(lam, (h, w), traps, rng)
     counts = rng.poisson(lam)
-    hot = rng.choice(w * h, size=min(config.hot_pixels, w * h), replace=False)
+    n_hot = config.hot_pixels * (5 if "hot_pixels" in traps else 1)
+    hot = rng.choice(w * h, size=min(n_hot, w * h), replace=False)
     counts[hot] += rng.integers(200, 5000, hot.size)
     dead = rng.choice(w * h, size=min(config.dead_pixels, w * h), replace=False)
     counts[dead] = 0
@@ -236,11 +265,12 @@ def write_dataset(
 
     out = Path(out_dir)
     if check_out_dir(out, overwrite):
-        for sub in ("event", "lidar"):
+        for sub in ("event", "image", "lidar"):
             for old in (out / sub).glob("scene_*"):
                 old.unlink()
         shutil.rmtree(out / ".l2e_cache", ignore_errors=True)
-    for sub in ("event", "lidar", "config"):
+    map_dir = "image" if config.map_kind == "image" else "event"
+    for sub in (map_dir, "lidar", "config"):
         (out / sub).mkdir(parents=True, exist_ok=True)
 
     camera, truth, seed = make_rig(config)
@@ -250,8 +280,8 @@ def write_dataset(
         stem = scene_stem(i)
         ok, png = cv2.imencode(".png", event_map)
         if not ok:
-            raise InputError(out / "event" / f"{stem}.png", "could not encode the PNG")
-        atomic_write_bytes(out / "event" / f"{stem}.png", png.tobytes())
+            raise InputError(out / map_dir / f"{stem}.png", "could not encode the PNG")
+        atomic_write_bytes(out / map_dir / f"{stem}.png", png.tobytes())
         write_points_txt(out / "lidar" / f"{stem}.txt", points, intensity)
         if on_scene:
             on_scene(i + 1, config.n_scenes)

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .synth_world import Box, Decal, random_waves
+from .world import Box, Decal, random_waves
 
-RETRO = (1.15, 1.45)  # reflectance range of retro-reflective material (see synth_world)
+RETRO = (1.15, 1.45)  # reflectance range of retro-reflective material (see world.py)
 
 
 @dataclass

@@ -1,0 +1,77 @@
+"""Real data's failure modes reproduced by ``synth --realism`` / ``--traps``, and the verdict on
+results the traps pull away: it must never say ``trusted`` on those."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
+from l2e_studio.scenes import load_scene_folder
+from l2e_studio.synth import SynthConfig, config_with, perturb, read_truth, write_dataset
+from l2e_studio.verdict import judge
+
+SMALL = SynthConfig(n_scenes=3, width=480, height=270, points_per_scan=12_000, seed=5, map_kind="image")
+
+
+def _run(folder: Path, objective: str, n: int = 2) -> list[tuple[float, float, float, str, bool]]:
+    """(seed error, optimiser error, handed-back error (deg), status, kept seed) per run from 2 deg / 10 cm."""
+    scenes = load_scene_folder(folder, use_cache=False)
+    truth = read_truth(folder / "truth.yaml")
+    settings = CalibrationSettings(objective=objective, global_search=None if objective == "edges" else False)
+    rng = np.random.default_rng(11)
+    rows = []
+    for _ in range(n):
+        seed = perturb(truth, 2.0, 0.10, rng)
+        stack = stack_scenes(scenes.scenes, scenes.camera, seed, settings)
+        result = calibrate(stack, None, seed, settings)
+        verdict = judge(stack, result, settings)
+        rows.append((seed.error_to(truth)[0], result.extrinsic.error_to(truth)[0],
+                     verdict.extrinsic.error_to(truth)[0], verdict.status, verdict.kept_seed))
+    return rows
+
+
+@pytest.mark.parametrize("traps, scale, points, seed", [
+    (("sky", "shading", "texture"), 1.0, 12_000, 5),  # saturated sky, shading and unrelated texture
+    (("sky", "shading"), 0.055, 3_000, 0),  # a sparse, dim cloud (intensities 0..14)
+])
+def test_the_verdict_never_trusts_what_a_trap_pulled_away(tmp_path: Path, traps, scale, points, seed) -> None:
+    config = config_with(SMALL, traps=traps, intensity_scale=scale, points_per_scan=points, seed=seed)
+    rows = _run(write_dataset(tmp_path / "trap", config), "mi", 3)
+    assert any(raw > seed + 1.0 for seed, raw, *_ in rows), f"the trap did not pull the paper's MI away: {rows}"
+    for seed, raw, handed, status, kept in rows:
+        if raw > seed + 0.1:  # pulled away
+            assert status == "not-trusted" and kept and handed == pytest.approx(seed), rows
+        assert handed <= seed + 0.1, rows  # never hands back worse
+
+
+def test_traps_change_the_images_as_described(tmp_path: Path) -> None:
+    plain = write_dataset(tmp_path / "plain", config_with(SMALL, n_scenes=1))
+    trapped = write_dataset(tmp_path / "trapped", config_with(SMALL, n_scenes=1, realism=True))
+    a = cv2.imread(str(plain / "image" / "scene_000.png"), cv2.IMREAD_GRAYSCALE)
+    b = cv2.imread(str(trapped / "image" / "scene_000.png"), cv2.IMREAD_GRAYSCALE)
+    assert a.shape == b.shape == (270, 480)
+    assert (b >= 250).mean() > 0.05 > (a >= 250).mean()  # a saturated sky
+    # the lidar returns nothing from the sky, so the trapped scan is smaller
+    n_plain = len((plain / "lidar" / "scene_000.txt").read_text().splitlines())
+    n_trap = len((trapped / "lidar" / "scene_000.txt").read_text().splitlines())
+    assert n_trap < n_plain
+
+
+def test_event_realism_keeps_the_l2e_case_calibrating(tmp_path: Path) -> None:
+    config = SynthConfig(n_scenes=4, width=480, height=270, points_per_scan=15_000, seed=2, realism=True)
+    folder = write_dataset(tmp_path / "ev", config)
+    m = cv2.imread(str(folder / "event" / "scene_000.png"), cv2.IMREAD_GRAYSCALE)
+    assert (m[int(270 * 0.9):] <= 10).mean() > 0.95  # the occluded band
+    for seed, raw, handed, status, _ in _run(folder, "mi", 1):
+        assert raw < 0.3 < seed and status == "trusted" and handed == pytest.approx(raw)
+
+
+def test_unknown_traps_are_refused() -> None:
+    with pytest.raises(ValueError, match="unknown image trap"):
+        SynthConfig(map_kind="image", traps=("flicker",))
+    with pytest.raises(ValueError, match="map_kind"):
+        SynthConfig(map_kind="lidar")
