@@ -51,13 +51,13 @@ class QualityReport:
 
 
 def sharpness(stack: SceneStack, ext: Extrinsic) -> np.ndarray:
-    """Mean drop of the paper's MI for a step of ``STEP_M`` / ``STEP_DEG`` along each axis."""
-    centre = stack.mi(ext, per_scene=False)[0]
+    """Mean drop of the stack's score for a step of ``STEP_M`` / ``STEP_DEG`` along each axis."""
+    centre = stack.score(ext, per_scene=False)[0]
     drops = np.zeros(6)
     for k in range(6):
         step = np.zeros(6)
         step[k] = STEP_M if k < 3 else np.radians(STEP_DEG)
-        vals = [stack.mi(ext.perturbed(s * step[:3], s * step[3:]), per_scene=False)[0] for s in (-1.0, 1.0)]
+        vals = [stack.score(ext.perturbed(s * step[:3], s * step[3:]), per_scene=False)[0] for s in (-1.0, 1.0)]
         drops[k] = centre - float(np.mean(vals))
     return drops
 
@@ -77,7 +77,7 @@ def assess(
     for axis, drop in zip(AXES, drops):
         if drop < FLAT_NATS:
             unit = f"{100 * STEP_M:.0f} cm" if axis in AXES[:3] else f"{STEP_DEG} deg"
-            warnings.append(f"flat along {axis}: moving {unit} changes the MI by only {drop:+.4f} nats")
+            warnings.append(f"flat along {axis}: moving {unit} changes the score by only {drop:+.4f}")
 
     rot = trans = None
     if stack.n_scenes < 2:

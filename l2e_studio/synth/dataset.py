@@ -2,7 +2,7 @@
 
 A cartoon of the paper's setup: a MEMS lidar (RS-LiDAR-M1: 120 x 25 deg, ~75k points per scan)
 and an event camera (Prophesee GEN4.1: 1280 x 720, 63 x 38 deg) on one rig, in a garage
-(:mod:`l2e_studio.synth_layout`). For each scene:
+(:mod:`l2e_studio.synth.layout`). For each scene:
 
 * the lidar casts a jittered zig-zag raster of rays into the world; a return is the first hit,
   with Gaussian range noise, and an intensity (calibrated reflectivity, 0..255) that follows the

@@ -9,7 +9,7 @@ far more light back towards the lidar and the camera beside it.
 
 Ray casting is analytic (slab test) and vectorised over rays; a bounding-sphere test culls the
 boxes a bundle of rays cannot reach. The scene layout itself lives in
-:mod:`l2e_studio.synth_layout`.
+:mod:`l2e_studio.synth.layout`.
 """
 
 from __future__ import annotations
