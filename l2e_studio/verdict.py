@@ -34,8 +34,9 @@ from .scoring.edges import canny_distance, lidar_edge_weights
 
 STATUSES = ("trusted", "trusted-rotation", "not-trusted")
 ON_UNTRUSTED = ("keep-seed", "mark")
-AGREE_DEG = 0.3  # the two halves' answers must agree this well ...
+AGREE_DEG = 0.3  # independent answers must agree this well (at least) ...
 AGREE_M = 0.03  # ... in rotation and in translation
+AGREE_FRACTION = 0.5  # ... and in rotation to within this share of the distance the result moved from the seed
 EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distance (at 1280 px wide)
 SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
 MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
@@ -150,19 +151,64 @@ def judge(
     t0 = time.perf_counter()
     seed, res = result.seed, result.extrinsic
     final = stack.with_sigma(settings.sigma)
-    checks: list[Check] = []
+    checks = evidence(final, seed, res, settings, cancel)
+    failed = [c for c in checks if not c.passed]
+    reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
+    if not failed:
+        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0)
+    if all(c.name.endswith("(translation)") for c in failed):
+        # Only the translation is not pinned down (one or two scans of a street seldom pin it):
+        # hand back the checked rotation with the seed's translation, if the scenes and both
+        # halves prefer that to the seed too.
+        mixed = Extrinsic(res.rotvec, seed.translation)
+        if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0]
+               for h in (final, *(final.select(m) for m in halves(final, seed)))):
+            return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0)
+    if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only:
+        # A wrong translation also confounds the rotation's checks: keep the seed's translation,
+        # fit the rotation to it (near the result's), and judge that rotation afresh.
+        rotation = replace(settings, rotation_only=True)
+        refit = calibrate(final, None, Extrinsic(res.rotvec, seed.translation),
+                          replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
+                          cancel=cancel).extrinsic
+        refit = Extrinsic(refit.rotvec, seed.translation)
+        rot_checks = evidence(final, seed, refit, rotation, cancel)
+        rot_failed = [c for c in rot_checks if not c.passed]
+        if not rot_failed:
+            return Verdict("trusted-rotation", refit, False, reasons, tuple(checks) + tuple(rot_checks),
+                           time.perf_counter() - t0)
+        reasons += tuple(f"with the seed's translation, {c.name}: {c.detail}" for c in rot_failed)
+        checks += rot_checks
+    keep = on_untrusted == "keep-seed"
+    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
 
-    gain = result.score_result - result.score_seed
-    checks.append(Check("score", gain > 0, f"{result.objective} score {result.score_seed:.4f} -> {result.score_result:.4f}"))
+
+def evidence(
+    final: SceneStack,
+    seed: Extrinsic,
+    res: Extrinsic,
+    settings: CalibrationSettings,
+    cancel: threading.Event | None = None,
+) -> list[Check]:
+    """The checks of ``res`` against ``seed`` on ``final`` (the stack at the final smoothing).
+    With ``settings.rotation_only`` the translation is the seed's and only the rotation is tested."""
+    rotation_only = settings.rotation_only
+    tag = " (rotation only)" if rotation_only else ""
+    # agreement is asked to the precision the move from the seed needs: independent estimates
+    # must agree well within the distance moved (and to AGREE_DEG however small the move)
+    limit_deg = max(AGREE_DEG, AGREE_FRACTION * seed.error_to(res)[0])
+    checks: list[Check] = []
+    s_seed, s_res = final.score(seed, per_scene=False)[0], final.score(res, per_scene=False)[0]
+    checks.append(Check("score" + tag, s_res > s_seed, f"{final.objective_name} score {s_seed:.4f} -> {s_res:.4f}"))
 
     name, before = second_score(final, seed)
     _, after = second_score(final, res)
     slack = SECOND_SCORE_SLACK if name.startswith("edge") else 0.0
-    checks.append(Check("second score", after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
+    checks.append(Check("second score" + tag, after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
 
     a, b = halves(final, seed)
     if a.sum() == 0 or b.sum() == 0:
-        checks.append(Check("halves", False, "too few points to split into two halves"))
+        checks.append(Check("halves" + tag, False, "too few points to split into two halves"))
     else:
         # each half on its own must prefer the result to the seed, and the result must be a
         # peak of each half: refined on one half alone, it stays where it is
@@ -170,40 +216,32 @@ def judge(
         better, detail, rot_moved, trans_moved = True, [], [], []
         for mine in (a, b):
             half = final.select(mine)
-            s_seed, s_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
-            better &= s_res > s_seed
-            detail.append(f"{s_seed:.4f} -> {s_res:.4f}")
+            h_seed, h_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
+            better &= h_res > h_seed
+            detail.append(f"{h_seed:.4f} -> {h_res:.4f}")
             rot_moved.append(calibrate(half, None, res, replace(local, rotation_only=True), cancel=cancel).extrinsic.error_to(res)[0])
-            trans_moved.append(calibrate(half, None, res, local, cancel=cancel).extrinsic.error_to(res)[1])
-        checks.append(Check("both halves prefer the result", better, "score of each half, seed -> result: " + ", ".join(detail)))
-        checks.append(Check("halves agree (rotation)", max(rot_moved) <= AGREE_DEG,
-                            f"refined on either half alone the rotation moves {max(rot_moved):.3f} deg (limit {AGREE_DEG})"))
-        checks.append(Check("halves agree (translation)", max(trans_moved) <= AGREE_M,
-                            f"refined on either half alone the translation moves {100 * max(trans_moved):.1f} cm "
-                            f"(limit {100 * AGREE_M:.0f})"))
+            if not rotation_only:
+                trans_moved.append(calibrate(half, None, res, local, cancel=cancel).extrinsic.error_to(res)[1])
+        checks.append(Check("both halves prefer the result" + tag, better,
+                            "score of each half, seed -> result: " + ", ".join(detail)))
+        checks.append(Check("halves agree (rotation)" + tag, max(rot_moved) <= limit_deg,
+                            f"refined on either half alone the rotation moves {max(rot_moved):.3f} deg "
+                            f"(limit {limit_deg:.2f})"))
+        if not rotation_only:
+            checks.append(Check("halves agree (translation)", max(trans_moved) <= AGREE_M,
+                                f"refined on either half alone the translation moves {100 * max(trans_moved):.1f} cm "
+                                f"(limit {100 * AGREE_M:.0f})"))
 
     # a start on the far side of the result must come back to it
-    other = calibrate(final, None, mirrored_start(seed, res), settings, cancel=cancel).extrinsic
+    start = mirrored_start(seed, res)
+    if rotation_only:
+        start = Extrinsic(start.rotvec, res.translation)
+    other = calibrate(final, None, start, settings, cancel=cancel).extrinsic
     deg, m = other.error_to(res)
-    checks.append(Check("second start (rotation)", deg <= AGREE_DEG,
-                        f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {AGREE_DEG})"))
-    checks.append(Check("second start (translation)", m <= AGREE_M,
-                        f"from a start mirrored through the result it ends {100 * m:.1f} cm away (limit {100 * AGREE_M:.0f})"))
-
-    failed = [c for c in checks if not c.passed]
-    reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
-    if not failed:
-        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0)
-    if all(c.name.endswith("(translation)") for c in failed):
-        # keep the seed's translation, re-fit the rotation to it (close to the checked one), and
-        # hand it back only if the scenes and both halves still prefer it to the seed
-        refit = calibrate(final, None, Extrinsic(res.rotvec, seed.translation),
-                          replace(settings, rotation_only=True, coarse_to_fine=False, global_search=False,
-                                  rotation_bound_deg=REFIT_BOUND_DEG), cancel=cancel).extrinsic
-        refit = Extrinsic(refit.rotvec, seed.translation)
-        if all(final.select(m).score(refit, per_scene=False)[0] > final.select(m).score(seed, per_scene=False)[0]
-               for m in (a, b)):
-            return Verdict("trusted-rotation", refit, False, reasons, tuple(checks), time.perf_counter() - t0)
-        reasons += ("with the seed's translation kept, the re-fitted rotation no longer beats the seed on both halves",)
-    keep = on_untrusted == "keep-seed"
-    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
+    checks.append(Check("second start (rotation)" + tag, deg <= limit_deg,
+                        f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {limit_deg:.2f})"))
+    if not rotation_only:
+        checks.append(Check("second start (translation)", m <= AGREE_M,
+                            f"from a start mirrored through the result it ends {100 * m:.1f} cm away "
+                            f"(limit {100 * AGREE_M:.0f})"))
+    return checks
