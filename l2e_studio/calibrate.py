@@ -187,16 +187,17 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
     run = _Run(stack, seed, settings, scale, free, len(stages), on_progress, cancel, t0)
     current = seed
     if _global_search(settings, stack) and len(stages) > 1:
-        # several starts climb the coarse stages; the fine score picks which one finishes
-        starts = [seed] + _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
+        # several starts climb every stage, and the seed also skips the coarsest (its blur can
+        # hold side peaks that a seed already in the fine basin should not be dragged to); the
+        # final score picks the answer
+        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
+        climbs = [(seed, 0), (seed, 1)] + [(start, 0) for start in grid]
         ends = []
-        for start in starts:
-            ends.append(run.climb(start, stages[:-1]))
+        for start, first in climbs:
+            ends.append(run.climb(start, stages[first:], first=first))
             if run.cancelled:
                 break
         current = max(ends, key=lambda e: final.score(e, per_scene=False)[0])
-        if not run.cancelled:
-            current = run.climb(current, stages[-1:], first=len(stages) - 1)
     else:
         current = run.climb(seed, stages)
     cancelled, message, count, history = run.cancelled, run.message, run.count, run.history
