@@ -26,7 +26,7 @@ import numpy as np
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.geometry import Extrinsic
 from l2e_studio.scenes import load_scene_folder
-from l2e_studio.synth import SynthConfig, config_with, read_truth, write_dataset
+from l2e_studio.synth import SynthConfig, config_with, perturb, read_truth, write_dataset
 from l2e_studio.verdict import judge
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -72,6 +72,8 @@ def main() -> None:
     ap.add_argument("--scaling", action="store_true")
     ap.add_argument("--cli", action="store_true")
     ap.add_argument("--realism", action="store_true", help="the harder synthetic mode")
+    ap.add_argument("--seed-level", help="DEG,M: seeds exactly this far off in a random direction "
+                                         "(default: the paper's uniform 0.1 m / 0.1 rad per axis)")
     args = ap.parse_args()
 
     folder = dataset(args.scenes, args.realism)
@@ -94,8 +96,9 @@ def main() -> None:
 
     rng = np.random.default_rng(2023)
     rows = []
+    level = tuple(float(v) for v in args.seed_level.split(",")) if args.seed_level else None
     for i in range(args.runs):
-        seed = perturbed_seed(truth, rng)
+        seed = perturb(truth, level[0], level[1], rng) if level else perturbed_seed(truth, rng)
         res = calibrate(stack, None, seed, settings)
         verdict = judge(stack, res, settings)
         deg, m = res.extrinsic.error_to(truth)
