@@ -212,7 +212,9 @@ def evidence(
     else:
         # each half on its own must prefer the result to the seed, and the result must be a
         # peak of each half: refined on one half alone, it stays where it is
-        local = replace(settings, coarse_to_fine=False, global_search=False)
+        last = settings.schedule(final.camera.width, final.camera.height)[-1]
+        budget = None if last.max_points is None else last.max_points // 2  # half the points, half the budget
+        local = replace(settings, stages=(replace(last, max_points=budget),), global_search=False)
         better, detail, rot_moved, trans_moved = True, [], [], []
         for mine in (a, b):
             half = final.select(mine)
