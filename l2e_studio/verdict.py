@@ -66,13 +66,16 @@ class Verdict:
         return self.status != "not-trusted"
 
     def summary(self) -> str:
-        """One line a user understands."""
+        """One line a user understands (the reasons are in ``reasons``)."""
         if self.status == "trusted":
-            return "trusted: held-out halves and an independent score agree with the result"
+            return "trusted: both halves of the data, a second start and an independent score agree with the result"
         if self.status == "trusted-rotation":
-            return "rotation trusted; translation not observable from these scenes, the seed's translation is kept"
-        action = "the seed is kept" if self.kept_seed else "the result is kept but marked not trusted"
-        return f"not trusted ({'; '.join(self.reasons)}): {action}"
+            return "rotation trusted; the translation is not pinned down by these scenes, the seed's translation is kept"
+        return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")
+
+    def lines(self) -> list[str]:
+        """The summary, then one indented line per reason (for a terminal)."""
+        return [f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
 
     def to_dict(self) -> dict:
         return {

@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         console.print(_summary(result, scene_set.seed))
     if verdict is not None:
-        console.print(f"verdict: {verdict.summary()}", highlight=False)
+        print("\n".join(verdict.lines()), flush=True)
     data = result_bytes(args.out, result, scene_set.camera, scene_set.root, quality, verdict)
     try:
         out, backup = args.out, atomic_write_bytes(args.out, data, keep_existing=True)
