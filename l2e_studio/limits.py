@@ -11,6 +11,12 @@ import math
 #: Image / sensor side, pixels. The largest event sensors are 1280x720; frame cameras used as
 #: stand-ins stay far below this. A header or camera file claiming more is refused.
 MAX_IMAGE_SIDE = 16_384
+#: Event sensor side, pixels, when a recording states no size (the largest sensors are 1280x720):
+#: a grid grown to the coordinates seen stops here instead of allocating gigabytes.
+MAX_EVENT_SENSOR_SIDE = 4096
+#: Event times may step back this much (microseconds; decoder jitter) and are still handled;
+#: a larger backward step means the recording is not time-ordered, and is refused.
+MAX_BACKWARD_STEP_US = 1000
 #: A rotation block R is accepted when max |R^T R - I| and |det R - 1| are within this.
 ROTATION_TOLERANCE = 1e-3
 #: Translation bound per axis, metres: a lidar-camera rig is at most a few metres across.

@@ -300,7 +300,91 @@ SCENE_CASES = {
     "two-maps-one-stem": (_scene_case(_twin_maps), ["share the stem"]),
 }
 
-ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES}
+def _events_case(name: str, make: Callable[[], bytes | dict], *options: str,
+                 names_option: bool = False) -> Callable[[Path], list]:
+    """One recording in ``ev/events_raw/`` (a dict is saved as .npz), run through ``accumulate``."""
+    def build(tmp: Path) -> list:
+        raw = tmp / "ev" / "events_raw"
+        raw.mkdir(parents=True)
+        data = make()
+        if isinstance(data, dict):
+            np.savez(raw / name, **data)
+        else:
+            (raw / name).write_bytes(data)
+        return ["accumulate", tmp / "ev", *options], (options[0] if names_option else raw / name)
+    return build
+
+
+def _events(n: int = 20000, width: int = 320, height: int = 180, **change) -> dict:
+    rng = np.random.default_rng(2)
+    ev = {"x": rng.integers(0, width, n), "y": rng.integers(0, height, n), "t": np.sort(rng.integers(0, 2_000_000, n)),
+          "p": rng.integers(0, 2, n), "sensor_size": np.array([width, height])}
+    for key, fn in change.items():
+        ev[key] = fn(ev[key])
+    return ev
+
+
+def _backward_jump(t: np.ndarray) -> np.ndarray:
+    t = t.copy()
+    t[len(t) // 2:] -= 1_000_000
+    return t
+
+
+def _with_nan(a: np.ndarray) -> np.ndarray:
+    a = a.astype(np.float64)
+    a[7] = np.nan
+    return a
+
+
+def _evt2(width: int, height: int, n: int = 5000, max_x: int | None = None) -> bytes:
+    from l2e_studio.io.event_prophesee import encode_evt2
+
+    rng = np.random.default_rng(3)
+    x = rng.integers(0, max_x or width, n)
+    return encode_evt2(x, rng.integers(0, height, n), np.sort(rng.integers(0, 1_000_000, n)), rng.integers(0, 2, n),
+                       width, height)
+
+
+def _dat_bomb() -> bytes:
+    from l2e_studio.io.event_prophesee import encode_dat
+
+    return encode_dat([16383, 0], [16383, 0], [0, 10], [1, 0])  # 63 bytes, no sensor size
+
+
+def _camera_yaml_for_events(tmp_make):
+    def build(tmp: Path) -> list:
+        args, named = tmp_make(tmp)
+        (tmp / "ev" / "camera.yaml").write_text(_ours())
+        return args, named
+    return build
+
+
+EVENT_CASES = {
+    "events-reversed": (_events_case("a.npz", lambda: _events(t=lambda t: t[::-1].copy())), ["backwards"]),
+    "events-backward-jump": (_events_case("a.npz", lambda: _events(t=_backward_jump)), ["backwards"]),
+    "events-nan-time": (_events_case("a.npz", lambda: _events(t=lambda t: _with_nan(t / 1e6))), ["NaN"]),
+    "events-nan-x": (_events_case("a.npz", lambda: _events(x=_with_nan)), ["NaN"]),
+    "events-fractional-y": (_events_case("a.npz", lambda: _events(y=lambda y: y + 0.5)), ["fractional"]),
+    "events-negative-x": (_events_case("a.npz", lambda: _events(x=lambda x: x - 5)), ["negative"]),
+    "events-outside-declared-sensor": (_events_case("a.npz", lambda: _events(x=lambda x: x * 3)), ["outside the 320x180"]),
+    "events-header-larger-than-camera": (_camera_yaml_for_events(_events_case("a.raw", lambda: _evt2(1280, 720))),
+                                         ["1280x720 sensor but the camera is 320x180"]),
+    "events-size-option-disagrees": (_events_case("a.raw", lambda: _evt2(640, 480), "--size", "320x240"),
+                                     ["640x480 sensor but the camera is 320x240"]),
+    "events-header-huge-sensor": (_events_case("a.raw", lambda: _evt2(100000, 100000, max_x=100)), ["at most"]),
+    "events-dat-63-bytes": (_events_case("a.dat", _dat_bomb), ["beyond any event sensor"]),
+    "events-raw-random-bytes": (_events_case("a.raw", lambda: RNG.bytes(4096)), ["a.raw"]),
+    "events-npz-no-arrays": (_events_case("a.npz", lambda: {"foo": np.arange(3)}), ["a.npz"]),
+    "events-window-nan": (_events_case("a.npz", _events, "--window", "nan", names_option=True), ["--window"]),
+    "events-window-negative": (_events_case("a.npz", _events, "--window", "-3", names_option=True), ["--window"]),
+    "events-window-1e12": (_events_case("a.npz", _events, "--window", "1e12", names_option=True), ["--window"]),
+    "events-start-inf": (_events_case("a.npz", _events, "--start", "inf", names_option=True), ["--start"]),
+    "events-hot-pixels-nan": (_events_case("a.npz", _events, "--hot-pixels", "nan", names_option=True), ["--hot-pixels"]),
+    "events-size-huge": (_events_case("a.npz", _events, "--size", "100000x100000", names_option=True), ["100000x100000"]),
+    "events-start-past-end": (_events_case("a.npz", _events, "--start", "100"), ["no events in the window"]),
+}
+
+ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))

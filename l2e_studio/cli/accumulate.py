@@ -18,9 +18,13 @@ pixels firing far above the rest. The sensor size comes from the file, ``--size 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..errors import InputError
+
+#: Longest accumulation window and latest start, seconds (a day: anything more is a typo).
+MAX_WINDOW_S = MAX_START_S = 86_400.0
 
 NAME = "accumulate"
 HELP = ("Build accumulated event maps (count per pixel over a window, clip to 127) from raw event files: "
@@ -85,6 +89,18 @@ def _stem(path: Path) -> str:
     return path.name[: -len(suffix)]
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """Refuse NaN, infinite or absurd windows, starts and hot-pixel sigmas with one line."""
+    import math
+
+    if not (math.isfinite(args.window) and 0 < args.window <= MAX_WINDOW_S):
+        raise InputError(None, f"--window must be in (0, {MAX_WINDOW_S:g}] seconds, got {args.window:g}")
+    if args.start is not None and not (math.isfinite(args.start) and 0 <= args.start <= MAX_START_S):
+        raise InputError(None, f"--start must be in [0, {MAX_START_S:g}] seconds, got {args.start:g}")
+    if args.hot_pixels is not None and not (math.isfinite(args.hot_pixels) and args.hot_pixels > 0):
+        raise InputError(None, f"--hot-pixels SIGMA must be a positive number, got {args.hot_pixels:g}")
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.progress import Progress
@@ -92,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.events import EVENT_SUFFIXES, accumulate_events_cached
     from ..io.maps import write_map_png
 
+    check_options(args)
     folder: Path = args.folder
     if not folder.is_dir():
         raise InputError(folder, "scene folder not found")
@@ -100,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(folder, f"no raw event files in events_raw/ or event/ ({', '.join(EVENT_SUFFIXES)})")
     width, height = _size(args, folder)
     console = Console(stderr=True)
-    written = cached = skipped = failed = 0
+    written = cached = skipped = 0
+    failures: list[InputError] = []
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("accumulating", total=len(to_png) + len(in_place))
         for path in to_png + in_place:
@@ -109,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if path in to_png and out.exists() and not args.force:
                     skipped += 1
-                    console.print(f"kept existing {out} (use --force to rebuild)")
+                    console.print(f"kept existing {out} (use --force to rebuild)", highlight=False)
                 else:
                     image = accumulate_events_cached(path, window_s=args.window, start_s=args.start,
                                                      hot_pixel_sigma=args.hot_pixels, width=width, height=height)
@@ -119,11 +137,15 @@ def run(args: argparse.Namespace) -> int:
                     else:
                         cached += 1
                     console.print(f"{path.name}: {image.shape[1]}x{image.shape[0]}, "
-                                  f"{int((image > 0).sum())} firing pixels, max {image.max():.0f}")
+                                  f"{int((image > 0).sum())} firing pixels, max {image.max():.0f}", highlight=False)
             except InputError as exc:
-                failed += 1
-                console.print(f"[red]skipped[/red] {exc}")
+                failures.append(exc)
             progress.advance(task)
+    if failures and not (written or cached or skipped):
+        more = f" (and {len(failures) - 1} more file(s) failed)" if len(failures) > 1 else ""
+        raise InputError(None, f"{failures[0]}{more}")
+    for exc in failures:
+        print(f"warning: skipped {exc}", file=sys.stderr)
     print(f"{written} map(s) written to {folder / 'event'}, {cached} cached in place, "
-          f"{skipped} kept, {failed} failed")
-    return 1 if failed and not (written or cached) else 0
+          f"{skipped} kept, {len(failures)} failed")
+    return 0

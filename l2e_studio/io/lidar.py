@@ -292,6 +292,13 @@ def _read_pcd(path: Path) -> dict[str, np.ndarray]:
         csize, usize = np.frombuffer(body[:8], dtype="<u4")
         if len(body) < 8 + int(csize):
             raise InputError(path, f"truncated binary_compressed PCD: {len(body) - 8} of {int(csize)} compressed bytes")
+        point_bytes = sum(np.dtype("<" + code).itemsize * count for _, code, count in dtypes)
+        if int(usize) != npoints * point_bytes:
+            raise InputError(path, f"binary_compressed PCD: {int(usize)} uncompressed bytes declared, but "
+                                   f"{npoints} points x {point_bytes} bytes = {npoints * point_bytes}")
+        if int(usize) > _lzf.MAX_RATIO * int(csize) + 1024:
+            raise InputError(path, f"binary_compressed PCD: {int(csize)} compressed bytes cannot hold the "
+                                   f"{int(usize)} declared (LZF expands at most {_lzf.MAX_RATIO}x)")
         try:
             raw = _lzf.decompress(body[8: 8 + int(csize)], int(usize))
         except ValueError as exc:
