@@ -384,7 +384,28 @@ EVENT_CASES = {
     "events-start-past-end": (_events_case("a.npz", _events, "--start", "100"), ["no events in the window"]),
 }
 
-ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
+def _serve_case(*options: str, out_file: bool = False) -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        extra = []
+        if out_file:
+            (tmp / "taken").write_text("x")
+            extra = ["--out", tmp / "taken"]
+        return ["--scenes", tmp / "scenes", *options, *extra], options[0] if options else tmp / "taken"
+    return build
+
+
+SERVE_CASES = {
+    "serve-host-unresolvable": (_serve_case("--host", "no-such-host.invalid"), ["does not resolve"]),
+    "serve-host-bad-address": (_serve_case("--host", "256.1.1.1"), ["does not resolve"]),
+    "serve-port-0": (_serve_case("--port", "0"), ["1..65535"]),
+    "serve-out-is-a-file": (_serve_case(out_file=True), ["not a folder"]),
+    "synth-out-is-a-file": (lambda tmp: (["synth", "--out", tmp / "scenes" / "camera.yaml", "--preset", "sample"],
+                                         tmp / "scenes" / "camera.yaml"), ["not a folder"]),
+    "synth-out-not-empty": (lambda tmp: (["synth", "--out", tmp / "scenes", "--preset", "sample"], tmp / "scenes"),
+                            ["not empty"]),
+}
+
+ALL_CASES = {**SERVE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
@@ -418,3 +439,38 @@ def test_unwritable_output_keeps_the_result(tmp: Path) -> None:
     assert saved.parent == tmp and saved.name.startswith("l2e_studio_result.unsaved-") and saved.suffix == ".yaml"
     assert load_seed(saved).error_to(load_seed(tmp / "scenes" / "camera.yaml"))[0] < 5  # a real result
     assert "T_cam_lidar" in yaml.safe_load(saved.read_text())
+
+
+def test_unresolvable_host_fails_within_seconds(tmp: Path) -> None:
+    run = run_cli("--host", "no-such-host.invalid", "--scenes", tmp / "scenes", cwd=tmp)
+    assert_one_line_error(run, "--host")
+    assert run.seconds < 15
+
+
+def test_non_loopback_host_prints_a_warning_with_the_real_url(tmp: Path, monkeypatch, capsys) -> None:
+    import l2e_studio.app.server as server_module
+    from l2e_studio.cli import main
+
+    class FakeApp:
+        url = "http://127.0.0.1:8123"
+        server = type("S", (), {"get_port": staticmethod(lambda: 8123)})()
+
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    assert main(["--host", "0.0.0.0", "--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: --host 0.0.0.0 exposes the workbench" in err and ":8123" in err and str(tmp / "o") in err
+    assert f"http://{_outbound()}:8123 can use it" in err  # the address other machines reach, not 127.0.0.1
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    assert main(["--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def _outbound() -> str:
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("192.0.2.1", 9))
+            return probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
