@@ -272,6 +272,12 @@ def _behind_seed(folder: Path) -> Path:
     return _seed_file(folder, Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth))
 
 
+def _corrupt_maps(folder: Path) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        f.write_bytes(f.read_bytes()[:100])
+    return folder / "event" / "scene_000.png"
+
+
 def _twin_scans(folder: Path) -> Path:
     for f in sorted((folder / "lidar").glob("*.txt")):
         shutil.copy(f, f.with_suffix(".csv"))
@@ -284,8 +290,69 @@ def _twin_maps(folder: Path) -> Path:
     return folder / "event" / "scene_000.npy"
 
 
+def _scans(write: Callable[[Path, int], Path]) -> Callable[[Path], Path]:
+    """Replace every scan of the folder by ``write(lidar_dir / stem, i)``; name the first."""
+    def damage(folder: Path) -> Path:
+        named = None
+        for i, f in enumerate(sorted((folder / "lidar").glob("*.txt"))):
+            f.unlink()
+            out = write(folder / "lidar" / f.stem, i)
+            named = named or out
+        return named
+    return damage
+
+
+PCD_HEAD = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+            "WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {kind}\n")
+
+
+def _pcd(stem: Path, n: int, kind: str, body: bytes) -> Path:
+    path = stem.with_suffix(".pcd")
+    path.write_bytes(PCD_HEAD.format(n=n, kind=kind).encode() + body)
+    return path
+
+
+def _pcd_bomb(stem: Path, i: int) -> Path:
+    n = 2**26  # 1 GiB of points declared in a ~250-byte file
+    return _pcd(stem, n, "binary_compressed", np.array([100, 16 * n], "<u4").tobytes() + bytes(100))
+
+
+def _write(suffix: str, data: bytes) -> Callable[[Path, int], Path]:
+    def write(stem: Path, i: int) -> Path:
+        path = stem.parent / (stem.name + suffix)
+        path.write_bytes(data)
+        return path
+    return write
+
+
+def _npy(arr: np.ndarray, suffix: str = ".npy") -> Callable[[Path, int], Path]:
+    def write(stem: Path, i: int) -> Path:
+        path = stem.parent / (stem.name + suffix)
+        np.save(path, arr, allow_pickle=True) if suffix == ".npy" else np.savez(path, foo=arr)
+        return path
+    return write
+
+
+PLY_HEAD = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\n" \
+           b"property float z\nproperty float intensity\nend_header\n"
+
 RNG = np.random.default_rng(1)
 SCENE_CASES = {
+    "pcd-compressed-bomb": (_scene_case(_scans(_pcd_bomb)), ["binary_compressed"]),
+    "pcd-binary-truncated": (_scene_case(_scans(lambda st, i: _pcd(st, 10**8, "binary", bytes(64)))), ["truncated"]),
+    "pcd-no-data-line": (_scene_case(_scans(_write(".pcd", b"# .PCD v0.7\nFIELDS x y z\n" * 30))), ["DATA"]),
+    "pcd-ascii-garbage": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "ascii", b"a b c d\n1 2\n"))), [".pcd"]),
+    "pcd-unknown-encoding": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "zip", b"xx"))), ["encoding"]),
+    "ply-billion-vertices": (_scene_case(_scans(_write(".ply", PLY_HEAD + bytes(160)))), [".ply"]),
+    "ply-not-ply": (_scene_case(_scans(_write(".ply", b"plx\nrandom\n"))), [".ply"]),
+    "npy-object-array": (_scene_case(_scans(_npy(np.array([{"a": 1}], dtype=object)))), [".npy"]),
+    "npy-1d": (_scene_case(_scans(_npy(np.arange(10.0)))), [".npy"]),
+    "npz-no-points": (_scene_case(_scans(_npy(np.arange(10.0), ".npz"))), [".npz"]),
+    "txt-words": (_scene_case(_scans(_write(".txt", b"hello world\nfoo bar\n"))), [".txt"]),
+    "txt-binary": (_scene_case(_scans(_write(".txt", RNG.bytes(2000)))), [".txt"]),
+    "txt-no-intensity": (_scene_case(_scans(_write(".txt", b"1,2,3\n4,5,6\n7,8,9\n"))), ["intensity"]),
+    "txt-all-nan": (_scene_case(_scans(_write(".txt", b"nan,nan,nan,1\n" * 10))), ["valid"]),
+    "png-corrupt": (_scene_case(lambda d: _corrupt_maps(d)), [".png"]),
     "maps-all-zero": (_scene_case(lambda d: _maps(d, 0)), ["constant"]),
     "maps-constant": (_scene_case(lambda d: _maps(d, 40)), ["constant"]),
     "intensities-all-zero": (_scene_case(lambda d: _intensities(d, 0.0)), ["intensities are equal"]),
