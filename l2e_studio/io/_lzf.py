@@ -3,7 +3,7 @@
 LZF is a byte-oriented LZ77 variant: a control byte below 32 starts a literal run of
 ``ctrl + 1`` bytes; otherwise its top 3 bits are a match length (7 = "read one more length
 byte") and its low 5 bits plus the next byte a back-reference distance. Uses the ``lzf`` C
-extension (PyPI ``python-lzf``) when it is installed, this loop otherwise.
+extension (PyPI ``python-neo-lzf``, a dependency; ``python-lzf`` provides the same module) when it is installed, this loop otherwise.
 """
 
 from __future__ import annotations
