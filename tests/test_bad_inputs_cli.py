@@ -278,6 +278,27 @@ def _corrupt_maps(folder: Path) -> Path:
     return folder / "event" / "scene_000.png"
 
 
+def _png_declaring(width: int, height: int) -> bytes:
+    """A tiny, well-formed PNG header declaring ``width`` x ``height`` 8-bit grey pixels (few rows of data)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(width + 1) * 4)) + \
+        chunk(b"IEND", b"")
+
+
+def _png_maps(width: int, height: int) -> Callable[[Path], Path]:
+    def damage(folder: Path) -> Path:
+        for f in sorted((folder / "event").glob("*.png")):
+            f.write_bytes(_png_declaring(width, height))
+        return folder / "event" / "scene_000.png"
+    return damage
+
+
 def _twin_scans(folder: Path) -> Path:
     for f in sorted((folder / "lidar").glob("*.txt")):
         shutil.copy(f, f.with_suffix(".csv"))
@@ -353,6 +374,8 @@ SCENE_CASES = {
     "txt-no-intensity": (_scene_case(_scans(_write(".txt", b"1,2,3\n4,5,6\n7,8,9\n"))), ["intensity"]),
     "txt-all-nan": (_scene_case(_scans(_write(".txt", b"nan,nan,nan,1\n" * 10))), ["valid"]),
     "png-corrupt": (_scene_case(lambda d: _corrupt_maps(d)), [".png"]),
+    "png-declares-50000-squared": (_scene_case(_png_maps(50000, 50000)), ["50000x50000"]),
+    "png-declares-16000-squared": (_scene_case(_png_maps(16000, 16000)), ["16000x16000", "320x180"]),
     "maps-all-zero": (_scene_case(lambda d: _maps(d, 0)), ["constant"]),
     "maps-constant": (_scene_case(lambda d: _maps(d, 40)), ["constant"]),
     "intensities-all-zero": (_scene_case(lambda d: _intensities(d, 0.0)), ["intensities are equal"]),
