@@ -55,3 +55,17 @@ def test_a_non_utf8_file_name_loads_and_is_cached(scene_dir_copy: Path) -> None:
         ss = load_scene_folder(scene_dir_copy)
         assert "scene_\udcff" in ss.names and not ss.failures
     assert any(p.name.startswith("scene_\udcff.txt.") for p in (scene_dir_copy / ".l2e_cache").iterdir())
+
+
+def test_extract_refuses_clouds_without_intensity(tmp_path: Path, monkeypatch) -> None:
+    """A cloud with no intensity field is an error naming the bag, not an all-zero intensity scan."""
+    import l2e_studio.io.lidar as lidar
+    from l2e_studio.io.bags import ExtractSettings, extract_bag
+    from test_bags import _write
+
+    bag = tmp_path / "a.bag"
+    _write(bag, ros2=False)
+    monkeypatch.setattr(lidar, "INTENSITY_NAMES", ())  # the bag's "intensity" field is not recognised
+    with pytest.raises(InputError, match="a.bag: the point clouds have no intensity field"):
+        extract_bag(bag, tmp_path / "out", ExtractSettings())
+    assert not list((tmp_path / "out").rglob("*.pcd"))
