@@ -449,7 +449,40 @@ def _camera_yaml_for_events(tmp_make):
     return build
 
 
+def _h5(write: Callable) -> Callable[[Path], list]:
+    """An HDF5 recording in ``ev/events_raw/a.h5`` written by ``write(h5py.File)``, through ``accumulate``."""
+    def build(tmp: Path) -> list:
+        import h5py
+
+        raw = tmp / "ev" / "events_raw"
+        raw.mkdir(parents=True)
+        with h5py.File(raw / "a.h5", "w") as f:
+            write(f)
+        return ["accumulate", tmp / "ev"], raw / "a.h5"
+    return build
+
+
+def _h5_events(f, n: int = 1000, **change) -> None:
+    ev = _events(n)
+    ev.pop("sensor_size")
+    ev.update(change)
+    g = f.create_group("events")
+    for k, v in ev.items():
+        g.create_dataset(k, data=v)
+
+
+def _h5_sized(f) -> None:
+    _h5_events(f)
+    f["events"].attrs["width"], f["events"].attrs["height"] = 10**6, 10**6
+
+
 EVENT_CASES = {
+    "h5-random-bytes": (_events_case("a.h5", lambda: RNG.bytes(5000)), ["HDF5"]),
+    "h5-lengths-differ": (_h5(lambda f: _h5_events(f, x=np.arange(10))), ["different lengths"]),
+    "h5-only-x-y": (_h5(lambda f: f.create_group("events").create_dataset("x", data=np.arange(5))), ["no events"]),
+    "h5-string-coordinates": (_h5(lambda f: _h5_events(f, x=np.array([b"a"] * 1000))), ["a.h5"]),
+    "h5-huge-sensor-attrs": (_h5(_h5_sized), ["at most"]),
+    "h5-time-backwards": (_h5(lambda f: _h5_events(f, t=np.arange(1000)[::-1] * 10_000)), ["backwards"]),
     "events-reversed": (_events_case("a.npz", lambda: _events(t=lambda t: t[::-1].copy())), ["backwards"]),
     "events-backward-jump": (_events_case("a.npz", lambda: _events(t=_backward_jump)), ["backwards"]),
     "events-nan-time": (_events_case("a.npz", lambda: _events(t=lambda t: _with_nan(t / 1e6))), ["NaN"]),

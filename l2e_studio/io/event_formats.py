@@ -96,6 +96,8 @@ def _polarity(p: np.ndarray) -> np.ndarray:
 def _coords(path: Path, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x)
     y = np.asarray(y)
+    if not all(np.issubdtype(a.dtype, np.number) and a.ndim == 1 for a in (x, y)):
+        raise InputError(path, f"event coordinates must be 1-D numbers, got {x.dtype} {x.shape} and {y.dtype} {y.shape}")
     if x.size and not (np.issubdtype(x.dtype, np.integer) and np.issubdtype(y.dtype, np.integer)):
         bad = int(np.count_nonzero(~(np.isfinite(x) & np.isfinite(y))))
         if bad:
