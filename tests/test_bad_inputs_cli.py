@@ -597,3 +597,27 @@ def _outbound() -> str:
             return probe.getsockname()[0]
     except OSError:
         return socket.gethostname()
+
+
+@pytest.mark.parametrize("message, mi", [("Inequality constraints incompatible", 0.5),
+                                         ("Singular matrix E in LSQ subproblem", 0.5),
+                                         ("Optimization terminated successfully", float("nan"))])
+def test_a_failing_optimiser_is_an_error_not_a_result(tmp: Path, monkeypatch, capsys, message, mi) -> None:
+    import dataclasses
+
+    import l2e_studio.calibrate as engine
+    from l2e_studio.cli import main
+
+    real = engine.calibrate
+
+    def broken(*args, **kwargs):
+        return dataclasses.replace(real(*args, **kwargs), message=message, mi_result=mi)
+
+    monkeypatch.setattr(engine, "calibrate", broken)
+    code = main(["calibrate", "--scenes", str(tmp / "scenes"), "--single-stage", "--quiet", "--out", str(tmp / "r.yaml")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert code == 2 and len(err) == 1 and "the optimiser failed" in err[0]
+    assert not (tmp / "r.yaml").exists()
+    monkeypatch.setattr(engine, "calibrate", real)
+    assert main(["calibrate", "--scenes", str(tmp / "scenes"), "--single-stage", "--quiet",
+                 "--out", str(tmp / "r.yaml")]) == 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -86,8 +87,9 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
 
-    if not (math.isfinite(result.mi_result) and math.isfinite(result.mi_seed)):
-        raise InputError(None, f"the optimiser failed ({result.message or 'non-finite MI'}); no result was written")
+    failure = optimiser_failure(result)
+    if failure:
+        raise InputError(None, f"the optimiser failed ({failure}); no result was written")
     quality = None
     if args.check:
         with _progress(args.quiet, err) as prog:
@@ -112,6 +114,21 @@ def run(args: argparse.Namespace) -> int:
         highlight=False,
     )
     return 0
+
+
+#: scipy messages of an optimiser that broke down (SLSQP modes 4-7, NaN objectives), as opposed
+#: to one that stopped on a tolerance or an iteration limit.
+FAILURE_MESSAGES = re.compile(r"incompatible|singular matrix|rank-deficient|\bnan\b|more equality constraints", re.I)
+
+
+def optimiser_failure(result) -> str | None:
+    """Why ``result`` is not a result (non-finite MI, a broken-down optimiser), or None."""
+    if not (math.isfinite(result.mi_result) and math.isfinite(result.mi_seed)):
+        return f"non-finite MI: seed {result.mi_seed}, result {result.mi_result}"
+    message = str(result.message or "")
+    if FAILURE_MESSAGES.search(message):
+        return message
+    return None
 
 
 def _settings(args: argparse.Namespace):
