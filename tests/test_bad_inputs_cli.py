@@ -621,3 +621,28 @@ def test_a_failing_optimiser_is_an_error_not_a_result(tmp: Path, monkeypatch, ca
     monkeypatch.setattr(engine, "calibrate", real)
     assert main(["calibrate", "--scenes", str(tmp / "scenes"), "--single-stage", "--quiet",
                  "--out", str(tmp / "r.yaml")]) == 0
+
+
+@pytest.mark.parametrize("name", sorted(n for n in SEED_CASES if n not in ("seed-missing",)))
+def test_the_app_upload_path_refuses_the_same_seeds(name: str, tmp: Path) -> None:
+    """The browser's seed upload parses with the same loaders: the same bad files are one
+    InputError line naming the upload (what the app shows as a notification), nothing else."""
+    from l2e_studio.app.files import seed_from_upload
+    from l2e_studio.errors import InputError
+
+    build, fragments = SEED_CASES[name]
+    _, path = build(tmp)
+    with pytest.raises(InputError) as info:
+        seed_from_upload(path.name, path.read_bytes())
+    line = str(info.value)
+    assert line.startswith(path.name + ": ") and "\n" not in line
+    for frag in fragments:
+        assert frag in line
+
+
+def test_a_huge_upload_is_refused_before_parsing() -> None:
+    from l2e_studio.app.files import seed_from_upload
+    from l2e_studio.errors import InputError
+
+    with pytest.raises(InputError, match="big.yaml: is 200.0 MiB"):
+        seed_from_upload("big.yaml", b"#" * (200 * 2**20))
