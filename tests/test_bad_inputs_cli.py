@@ -354,6 +354,22 @@ def _npy(arr: np.ndarray, suffix: str = ".npy") -> Callable[[Path, int], Path]:
     return write
 
 
+def _las_bomb(stem: Path, i: int) -> Path:
+    import struct
+
+    import laspy
+
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = RNG.uniform(1, 10, (3, 100))
+    path = stem.with_suffix(".las")
+    las.write(path)
+    data = bytearray(path.read_bytes())
+    data[107:111] = struct.pack("<I", 2**31)  # 2 billion points declared in a ~3 kB file
+    path.write_bytes(bytes(data))
+    return path
+
+
 PLY_HEAD = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\n" \
            b"property float z\nproperty float intensity\nend_header\n"
 
@@ -364,6 +380,8 @@ SCENE_CASES = {
     "pcd-no-data-line": (_scene_case(_scans(_write(".pcd", b"# .PCD v0.7\nFIELDS x y z\n" * 30))), ["DATA"]),
     "pcd-ascii-garbage": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "ascii", b"a b c d\n1 2\n"))), [".pcd"]),
     "pcd-unknown-encoding": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "zip", b"xx"))), ["encoding"]),
+    "las-declares-2e9-points": (_scene_case(_scans(_las_bomb)), ["declares 2147483648 points"]),
+    "laz-random-bytes": (_scene_case(_scans(_write(".laz", RNG.bytes(3000)))), [".laz"]),
     "ply-billion-vertices": (_scene_case(_scans(_write(".ply", PLY_HEAD + bytes(160)))), [".ply"]),
     "ply-not-ply": (_scene_case(_scans(_write(".ply", b"plx\nrandom\n"))), [".ply"]),
     "npy-object-array": (_scene_case(_scans(_npy(np.array([{"a": 1}], dtype=object)))), [".npy"]),
