@@ -23,9 +23,6 @@ from pathlib import Path
 
 from ..errors import InputError
 
-#: Longest accumulation window and latest start, seconds (a day: anything more is a typo).
-MAX_WINDOW_S = MAX_START_S = 86_400.0
-
 NAME = "accumulate"
 HELP = ("Build accumulated event maps (count per pixel over a window, clip to 127) from raw event files: "
         "DIR/events_raw/<stem>.* -> DIR/event/<stem>.png; raw files in DIR/event/ get their map cached")
@@ -91,14 +88,11 @@ def _stem(path: Path) -> str:
 
 def check_options(args: argparse.Namespace) -> None:
     """Refuse NaN, infinite or absurd windows, starts and hot-pixel sigmas with one line."""
-    import math
+    from ..limits import MAX_WINDOW_S, require_range
 
-    if not (math.isfinite(args.window) and 0 < args.window <= MAX_WINDOW_S):
-        raise InputError(None, f"--window must be in (0, {MAX_WINDOW_S:g}] seconds, got {args.window:g}")
-    if args.start is not None and not (math.isfinite(args.start) and 0 <= args.start <= MAX_START_S):
-        raise InputError(None, f"--start must be in [0, {MAX_START_S:g}] seconds, got {args.start:g}")
-    if args.hot_pixels is not None and not (math.isfinite(args.hot_pixels) and args.hot_pixels > 0):
-        raise InputError(None, f"--hot-pixels SIGMA must be a positive number, got {args.hot_pixels:g}")
+    require_range("--window", args.window, 0.0, MAX_WINDOW_S, low_inclusive=False)
+    require_range("--start", args.start, 0.0, MAX_WINDOW_S)
+    require_range("--hot-pixels", args.hot_pixels, 0.0, 1000.0, low_inclusive=False)
 
 
 def run(args: argparse.Namespace) -> int:

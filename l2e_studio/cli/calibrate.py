@@ -134,16 +134,11 @@ def optimiser_failure(result) -> str | None:
 def _settings(args: argparse.Namespace):
     """The engine's settings; bounds and sigma outside a sane range (or NaN) are refused here."""
     from ..calibrate import CalibrationSettings
-    from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M, check_range
+    from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M, require_range
 
-    for option, value, low, high, low_ok in (
-        ("--bound-m", args.bound_m, 0.0, MAX_TRANSLATION_BOUND_M, True),
-        ("--bound-deg", args.bound_deg, 0.0, MAX_ROTATION_BOUND_DEG, False),
-        ("--sigma", args.sigma, 0.0, MAX_SIGMA_PX, True),
-    ):
-        if not check_range(value, low, high, low_ok):
-            raise InputError(None, f"{option} must be a finite number in {'[' if low_ok else '('}{low:g}, {high:g}], "
-                                   f"got {value:g}")
+    require_range("--bound-m", args.bound_m, 0.0, MAX_TRANSLATION_BOUND_M)
+    require_range("--bound-deg", args.bound_deg, 0.0, MAX_ROTATION_BOUND_DEG, low_inclusive=False)
+    require_range("--sigma", args.sigma, 0.0, MAX_SIGMA_PX)
     try:
         return CalibrationSettings(
             method=args.method,
