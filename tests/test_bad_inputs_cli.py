@@ -467,6 +467,13 @@ def _camera_yaml_for_events(tmp_make):
     return build
 
 
+def _accumulate_into_file(tmp: Path) -> tuple[list, Path]:
+    """``event`` is a file where accumulate writes its PNG maps: the write fails after decoding."""
+    args, _ = _events_case("a.npz", _events)(tmp)
+    (tmp / "ev" / "event").write_text("not a folder")
+    return args, tmp / "ev" / "event"
+
+
 def _h5(write: Callable) -> Callable[[Path], list]:
     """An HDF5 recording in ``ev/events_raw/a.h5`` written by ``write(h5py.File)``, through ``accumulate``."""
     def build(tmp: Path) -> list:
@@ -524,6 +531,9 @@ EVENT_CASES = {
                            ["--scans"]),
     "extract-out-is-a-file": (lambda tmp: (["extract", tmp / "x.bag", "--out", tmp / "scenes" / "camera.yaml"],
                                            tmp / "scenes" / "camera.yaml"), ["not a folder"]),
+    "accumulate-event-dir-is-a-file": (_accumulate_into_file, ["event"]),
+    "synth-parent-is-a-file": (lambda tmp: (["synth", "--out", tmp / "scenes" / "camera.yaml" / "new", "--preset", "sample"],
+                                            tmp / "scenes" / "camera.yaml"), ["is a file"]),
     "events-window-nan": (_events_case("a.npz", _events, "--window", "nan", names_option=True), ["--window"]),
     "events-window-negative": (_events_case("a.npz", _events, "--window", "-3", names_option=True), ["--window"]),
     "events-window-1e12": (_events_case("a.npz", _events, "--window", "1e12", names_option=True), ["--window"]),
