@@ -83,6 +83,14 @@ def _matrix_text(m) -> str:
     return "\n".join(" ".join(str(v) for v in row) for row in m) + "\n"
 
 
+def _npy_header(shape: tuple) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f4", "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
 SHEAR = [[1, 0.2, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 REFLECT = [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 
@@ -152,6 +160,7 @@ SEED_CASES = {
                              ["seed"]),
     "seed-no-rotation": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0]})), ["no rotvec"]),
     "seed-npy-object": (lambda tmp: _npy_seed(tmp, np.array([[1, "a"]], dtype=object)), [".npy"]),
+    "seed-npy-header-lies": (_seed_case(_npy_header((4, 4)) + bytes(8), "seed.npy"), ["header declares"]),
     "seed-npy-3x3": (lambda tmp: _npy_seed(tmp, np.eye(3)), ["4x4 or 3x4"]),
     "seed-over-size-cap": (_seed_case("# " + "x" * (5 * 2**20) + "\n" + _matrix_text(np.eye(4).tolist()), "seed.txt"),
                            ["MiB"]),
@@ -385,6 +394,8 @@ SCENE_CASES = {
     "ply-billion-vertices": (_scene_case(_scans(_write(".ply", PLY_HEAD + bytes(160)))), [".ply"]),
     "ply-not-ply": (_scene_case(_scans(_write(".ply", b"plx\nrandom\n"))), [".ply"]),
     "npy-object-array": (_scene_case(_scans(_npy(np.array([{"a": 1}], dtype=object)))), [".npy"]),
+    "npy-header-declares-8-GB": (_scene_case(_scans(_write(".npy", _npy_header((500_000_000, 4)) + bytes(64)))),
+                                 ["header declares"]),
     "npy-1d": (_scene_case(_scans(_npy(np.arange(10.0)))), [".npy"]),
     "npz-no-points": (_scene_case(_scans(_npy(np.arange(10.0), ".npz"))), [".npz"]),
     "txt-words": (_scene_case(_scans(_write(".txt", b"hello world\nfoo bar\n"))), [".txt"]),

@@ -37,7 +37,7 @@ from ..camera import CameraModel
 from ..errors import InputError
 from ..geometry import Extrinsic
 from ..limits import MAX_IMAGE_SIDE, ROTATION_TOLERANCE
-from .safe_load import MAX_DOCUMENT_BYTES, parse_json, parse_yaml, read_text_capped
+from .safe_load import MAX_DOCUMENT_BYTES, load_npy, parse_json, parse_yaml, read_text_capped
 
 #: ROS / OpenCV / Kalibr distortion model names -> ours.
 MODEL_NAMES = {
@@ -104,7 +104,9 @@ def load_seed(path: str | Path) -> Extrinsic:
         if path.stat().st_size > MAX_DOCUMENT_BYTES:
             raise InputError(path, f"a seed matrix file is at most {MAX_DOCUMENT_BYTES // 2**20} MiB")
         try:
-            return _extrinsic_from_matrix(path, np.load(path, allow_pickle=False))
+            return _extrinsic_from_matrix(path, load_npy(path))
+        except InputError:
+            raise
         except (ValueError, OSError) as exc:
             raise InputError(path, f"cannot read the .npy matrix ({exc})") from exc
     doc = _read_document(path)

@@ -44,6 +44,7 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
+from .safe_load import load_npy
 
 #: No lidar measures this far (metres); a binary scan full of such values is not a scan.
 MAX_RANGE_M = 10_000.0
@@ -445,7 +446,7 @@ def _from_array(path: Path, arr: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _read_npy(path: Path) -> dict[str, np.ndarray]:
-    return _from_array(path, np.load(path, allow_pickle=False))
+    return _from_array(path, load_npy(path))
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:

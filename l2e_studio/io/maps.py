@@ -27,6 +27,7 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from ..limits import MAX_IMAGE_SIDE
+from .safe_load import load_npy
 
 #: Image suffixes read as maps. Raw event suffixes (``EVENT_SUFFIXES``) are accepted as well.
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".exr")
@@ -151,7 +152,7 @@ def is_map_npy(path: Path) -> bool:
 
 
 def _read_npy_map(path: Path) -> np.ndarray:
-    arr = np.load(path, allow_pickle=False)
+    arr = load_npy(path)
     if not np.issubdtype(arr.dtype, np.number):
         raise InputError(path, f"map array has non-numeric dtype {arr.dtype}")
     arr = arr.astype(np.float32)
