@@ -158,6 +158,8 @@ SEED_CASES = {
     "seed-rotvec-text": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "rotvec": "up"})), ["seed rotvec"]),
     "seed-zero-quaternion": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 0]})),
                              ["seed"]),
+    "seed-quaternion-norm-2": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 2]})),
+                               ["norm 2"]),
     "seed-no-rotation": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0]})), ["no rotvec"]),
     "seed-npy-object": (lambda tmp: _npy_seed(tmp, np.array([[1, "a"]], dtype=object)), [".npy"]),
     "seed-npy-header-lies": (_seed_case(_npy_header((4, 4)) + bytes(8), "seed.npy"), ["header declares"]),
