@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -222,7 +223,7 @@ def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, 
     cache_file = None
     if cache_root is not None:
         st = path.stat()
-        key = hashlib.sha1(f"{path.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
+        key = hashlib.sha1(os.fsencode(path.resolve()) + f"|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
         cache_file = user_cache_dir("scans", folder_key(cache_root)) / f"{path.name}.{key}.npy"
         if cache_file.is_file():
             try:

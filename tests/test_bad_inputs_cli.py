@@ -83,6 +83,14 @@ def _matrix_text(m) -> str:
     return "\n".join(" ".join(str(v) for v in row) for row in m) + "\n"
 
 
+def _npy_header(shape: tuple) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f4", "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
 SHEAR = [[1, 0.2, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 REFLECT = [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
 
@@ -150,8 +158,11 @@ SEED_CASES = {
     "seed-rotvec-text": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "rotvec": "up"})), ["seed rotvec"]),
     "seed-zero-quaternion": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 0]})),
                              ["seed"]),
+    "seed-quaternion-norm-2": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0], "quaternion_xyzw": [0, 0, 0, 2]})),
+                               ["norm 2"]),
     "seed-no-rotation": (_seed_case(yaml.safe_dump({"translation": [0, 0, 0]})), ["no rotvec"]),
     "seed-npy-object": (lambda tmp: _npy_seed(tmp, np.array([[1, "a"]], dtype=object)), [".npy"]),
+    "seed-npy-header-lies": (_seed_case(_npy_header((4, 4)) + bytes(8), "seed.npy"), ["header declares"]),
     "seed-npy-3x3": (lambda tmp: _npy_seed(tmp, np.eye(3)), ["4x4 or 3x4"]),
     "seed-over-size-cap": (_seed_case("# " + "x" * (5 * 2**20) + "\n" + _matrix_text(np.eye(4).tolist()), "seed.txt"),
                            ["MiB"]),
@@ -272,6 +283,33 @@ def _behind_seed(folder: Path) -> Path:
     return _seed_file(folder, Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth))
 
 
+def _corrupt_maps(folder: Path) -> Path:
+    for f in sorted((folder / "event").glob("*.png")):
+        f.write_bytes(f.read_bytes()[:100])
+    return folder / "event" / "scene_000.png"
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A tiny, well-formed PNG header declaring ``width`` x ``height`` 8-bit grey pixels (few rows of data)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(width + 1) * 4)) + \
+        chunk(b"IEND", b"")
+
+
+def _png_maps(width: int, height: int) -> Callable[[Path], Path]:
+    def damage(folder: Path) -> Path:
+        for f in sorted((folder / "event").glob("*.png")):
+            f.write_bytes(_png_declaring(width, height))
+        return folder / "event" / "scene_000.png"
+    return damage
+
+
 def _twin_scans(folder: Path) -> Path:
     for f in sorted((folder / "lidar").glob("*.txt")):
         shutil.copy(f, f.with_suffix(".csv"))
@@ -284,8 +322,91 @@ def _twin_maps(folder: Path) -> Path:
     return folder / "event" / "scene_000.npy"
 
 
+def _scans(write: Callable[[Path, int], Path]) -> Callable[[Path], Path]:
+    """Replace every scan of the folder by ``write(lidar_dir / stem, i)``; name the first."""
+    def damage(folder: Path) -> Path:
+        named = None
+        for i, f in enumerate(sorted((folder / "lidar").glob("*.txt"))):
+            f.unlink()
+            out = write(folder / "lidar" / f.stem, i)
+            named = named or out
+        return named
+    return damage
+
+
+PCD_HEAD = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+            "WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {kind}\n")
+
+
+def _pcd(stem: Path, n: int, kind: str, body: bytes) -> Path:
+    path = stem.with_suffix(".pcd")
+    path.write_bytes(PCD_HEAD.format(n=n, kind=kind).encode() + body)
+    return path
+
+
+def _pcd_bomb(stem: Path, i: int) -> Path:
+    n = 2**26  # 1 GiB of points declared in a ~250-byte file
+    return _pcd(stem, n, "binary_compressed", np.array([100, 16 * n], "<u4").tobytes() + bytes(100))
+
+
+def _write(suffix: str, data: bytes) -> Callable[[Path, int], Path]:
+    def write(stem: Path, i: int) -> Path:
+        path = stem.parent / (stem.name + suffix)
+        path.write_bytes(data)
+        return path
+    return write
+
+
+def _npy(arr: np.ndarray, suffix: str = ".npy") -> Callable[[Path, int], Path]:
+    def write(stem: Path, i: int) -> Path:
+        path = stem.parent / (stem.name + suffix)
+        np.save(path, arr, allow_pickle=True) if suffix == ".npy" else np.savez(path, foo=arr)
+        return path
+    return write
+
+
+def _las_bomb(stem: Path, i: int) -> Path:
+    import struct
+
+    import laspy
+
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = RNG.uniform(1, 10, (3, 100))
+    path = stem.with_suffix(".las")
+    las.write(path)
+    data = bytearray(path.read_bytes())
+    data[107:111] = struct.pack("<I", 2**31)  # 2 billion points declared in a ~3 kB file
+    path.write_bytes(bytes(data))
+    return path
+
+
+PLY_HEAD = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\n" \
+           b"property float z\nproperty float intensity\nend_header\n"
+
 RNG = np.random.default_rng(1)
 SCENE_CASES = {
+    "pcd-compressed-bomb": (_scene_case(_scans(_pcd_bomb)), ["binary_compressed"]),
+    "pcd-binary-truncated": (_scene_case(_scans(lambda st, i: _pcd(st, 10**8, "binary", bytes(64)))), ["truncated"]),
+    "pcd-no-data-line": (_scene_case(_scans(_write(".pcd", b"# .PCD v0.7\nFIELDS x y z\n" * 30))), ["DATA"]),
+    "pcd-ascii-garbage": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "ascii", b"a b c d\n1 2\n"))), [".pcd"]),
+    "pcd-unknown-encoding": (_scene_case(_scans(lambda st, i: _pcd(st, 3, "zip", b"xx"))), ["encoding"]),
+    "las-declares-2e9-points": (_scene_case(_scans(_las_bomb)), ["declares 2147483648 points"]),
+    "laz-random-bytes": (_scene_case(_scans(_write(".laz", RNG.bytes(3000)))), [".laz"]),
+    "ply-billion-vertices": (_scene_case(_scans(_write(".ply", PLY_HEAD + bytes(160)))), [".ply"]),
+    "ply-not-ply": (_scene_case(_scans(_write(".ply", b"plx\nrandom\n"))), [".ply"]),
+    "npy-object-array": (_scene_case(_scans(_npy(np.array([{"a": 1}], dtype=object)))), [".npy"]),
+    "npy-header-declares-8-GB": (_scene_case(_scans(_write(".npy", _npy_header((500_000_000, 4)) + bytes(64)))),
+                                 ["header declares"]),
+    "npy-1d": (_scene_case(_scans(_npy(np.arange(10.0)))), [".npy"]),
+    "npz-no-points": (_scene_case(_scans(_npy(np.arange(10.0), ".npz"))), [".npz"]),
+    "txt-words": (_scene_case(_scans(_write(".txt", b"hello world\nfoo bar\n"))), [".txt"]),
+    "txt-binary": (_scene_case(_scans(_write(".txt", RNG.bytes(2000)))), [".txt"]),
+    "txt-no-intensity": (_scene_case(_scans(_write(".txt", b"1,2,3\n4,5,6\n7,8,9\n"))), ["intensity"]),
+    "txt-all-nan": (_scene_case(_scans(_write(".txt", b"nan,nan,nan,1\n" * 10))), ["valid"]),
+    "png-corrupt": (_scene_case(lambda d: _corrupt_maps(d)), [".png"]),
+    "png-declares-50000-squared": (_scene_case(_png_maps(50000, 50000)), ["50000x50000"]),
+    "png-declares-16000-squared": (_scene_case(_png_maps(16000, 16000)), ["16000x16000", "320x180"]),
     "maps-all-zero": (_scene_case(lambda d: _maps(d, 0)), ["constant"]),
     "maps-constant": (_scene_case(lambda d: _maps(d, 40)), ["constant"]),
     "intensities-all-zero": (_scene_case(lambda d: _intensities(d, 0.0)), ["intensities are equal"]),
@@ -300,7 +421,163 @@ SCENE_CASES = {
     "two-maps-one-stem": (_scene_case(_twin_maps), ["share the stem"]),
 }
 
-ALL_CASES = {**CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES}
+def _events_case(name: str, make: Callable[[], bytes | dict], *options: str,
+                 names_option: bool = False) -> Callable[[Path], list]:
+    """One recording in ``ev/events_raw/`` (a dict is saved as .npz), run through ``accumulate``."""
+    def build(tmp: Path) -> list:
+        raw = tmp / "ev" / "events_raw"
+        raw.mkdir(parents=True)
+        data = make()
+        if isinstance(data, dict):
+            np.savez(raw / name, **data)
+        else:
+            (raw / name).write_bytes(data)
+        return ["accumulate", tmp / "ev", *options], (options[0] if names_option else raw / name)
+    return build
+
+
+def _events(n: int = 20000, width: int = 320, height: int = 180, **change) -> dict:
+    rng = np.random.default_rng(2)
+    ev = {"x": rng.integers(0, width, n), "y": rng.integers(0, height, n), "t": np.sort(rng.integers(0, 2_000_000, n)),
+          "p": rng.integers(0, 2, n), "sensor_size": np.array([width, height])}
+    for key, fn in change.items():
+        ev[key] = fn(ev[key])
+    return ev
+
+
+def _backward_jump(t: np.ndarray) -> np.ndarray:
+    t = t.copy()
+    t[len(t) // 2:] -= 1_000_000
+    return t
+
+
+def _with_nan(a: np.ndarray) -> np.ndarray:
+    a = a.astype(np.float64)
+    a[7] = np.nan
+    return a
+
+
+def _evt2(width: int, height: int, n: int = 5000, max_x: int | None = None) -> bytes:
+    from l2e_studio.io.event_prophesee import encode_evt2
+
+    rng = np.random.default_rng(3)
+    x = rng.integers(0, max_x or width, n)
+    return encode_evt2(x, rng.integers(0, height, n), np.sort(rng.integers(0, 1_000_000, n)), rng.integers(0, 2, n),
+                       width, height)
+
+
+def _dat_bomb() -> bytes:
+    from l2e_studio.io.event_prophesee import encode_dat
+
+    return encode_dat([16383, 0], [16383, 0], [0, 10], [1, 0])  # 63 bytes, no sensor size
+
+
+def _camera_yaml_for_events(tmp_make):
+    def build(tmp: Path) -> list:
+        args, named = tmp_make(tmp)
+        (tmp / "ev" / "camera.yaml").write_text(_ours())
+        return args, named
+    return build
+
+
+def _accumulate_into_file(tmp: Path) -> tuple[list, Path]:
+    """``event`` is a file where accumulate writes its PNG maps: the write fails after decoding."""
+    args, _ = _events_case("a.npz", _events)(tmp)
+    (tmp / "ev" / "event").write_text("not a folder")
+    return args, tmp / "ev" / "event"
+
+
+def _h5(write: Callable) -> Callable[[Path], list]:
+    """An HDF5 recording in ``ev/events_raw/a.h5`` written by ``write(h5py.File)``, through ``accumulate``."""
+    def build(tmp: Path) -> list:
+        import h5py
+
+        raw = tmp / "ev" / "events_raw"
+        raw.mkdir(parents=True)
+        with h5py.File(raw / "a.h5", "w") as f:
+            write(f)
+        return ["accumulate", tmp / "ev"], raw / "a.h5"
+    return build
+
+
+def _h5_events(f, n: int = 1000, **change) -> None:
+    ev = _events(n)
+    ev.pop("sensor_size")
+    ev.update(change)
+    g = f.create_group("events")
+    for k, v in ev.items():
+        g.create_dataset(k, data=v)
+
+
+def _h5_sized(f) -> None:
+    _h5_events(f)
+    f["events"].attrs["width"], f["events"].attrs["height"] = 10**6, 10**6
+
+
+EVENT_CASES = {
+    "h5-random-bytes": (_events_case("a.h5", lambda: RNG.bytes(5000)), ["HDF5"]),
+    "h5-lengths-differ": (_h5(lambda f: _h5_events(f, x=np.arange(10))), ["different lengths"]),
+    "h5-only-x-y": (_h5(lambda f: f.create_group("events").create_dataset("x", data=np.arange(5))), ["no events"]),
+    "h5-string-coordinates": (_h5(lambda f: _h5_events(f, x=np.array([b"a"] * 1000))), ["a.h5"]),
+    "h5-huge-sensor-attrs": (_h5(_h5_sized), ["at most"]),
+    "h5-time-backwards": (_h5(lambda f: _h5_events(f, t=np.arange(1000)[::-1] * 10_000)), ["backwards"]),
+    "events-reversed": (_events_case("a.npz", lambda: _events(t=lambda t: t[::-1].copy())), ["backwards"]),
+    "events-backward-jump": (_events_case("a.npz", lambda: _events(t=_backward_jump)), ["backwards"]),
+    "events-nan-time": (_events_case("a.npz", lambda: _events(t=lambda t: _with_nan(t / 1e6))), ["NaN"]),
+    "events-nan-x": (_events_case("a.npz", lambda: _events(x=_with_nan)), ["NaN"]),
+    "events-fractional-y": (_events_case("a.npz", lambda: _events(y=lambda y: y + 0.5)), ["fractional"]),
+    "events-negative-x": (_events_case("a.npz", lambda: _events(x=lambda x: x - 5)), ["negative"]),
+    "events-outside-declared-sensor": (_events_case("a.npz", lambda: _events(x=lambda x: x * 3)), ["outside the 320x180"]),
+    "events-header-larger-than-camera": (_camera_yaml_for_events(_events_case("a.raw", lambda: _evt2(1280, 720))),
+                                         ["1280x720 sensor but the camera is 320x180"]),
+    "events-size-option-disagrees": (_events_case("a.raw", lambda: _evt2(640, 480), "--size", "320x240"),
+                                     ["640x480 sensor but the camera is 320x240"]),
+    "events-header-huge-sensor": (_events_case("a.raw", lambda: _evt2(100000, 100000, max_x=100)), ["at most"]),
+    "events-dat-63-bytes": (_events_case("a.dat", _dat_bomb), ["beyond any event sensor"]),
+    "events-raw-random-bytes": (_events_case("a.raw", lambda: RNG.bytes(4096)), ["a.raw"]),
+    "events-npz-no-arrays": (_events_case("a.npz", lambda: {"foo": np.arange(3)}), ["a.npz"]),
+    "extract-window-nan": (lambda tmp: (["extract", tmp / "x.bag", "--out", tmp / "o", "--window", "nan"], "--window"),
+                           ["--window"]),
+    "extract-slice-zero": (lambda tmp: (["extract", tmp / "x.bag", "--out", tmp / "o", "--slice", "0"], "--slice"),
+                           ["--slice"]),
+    "extract-scans-zero": (lambda tmp: (["extract", tmp / "x.bag", "--out", tmp / "o", "--scans", "0"], "--scans"),
+                           ["--scans"]),
+    "extract-out-is-a-file": (lambda tmp: (["extract", tmp / "x.bag", "--out", tmp / "scenes" / "camera.yaml"],
+                                           tmp / "scenes" / "camera.yaml"), ["not a folder"]),
+    "accumulate-event-dir-is-a-file": (_accumulate_into_file, ["event"]),
+    "synth-parent-is-a-file": (lambda tmp: (["synth", "--out", tmp / "scenes" / "camera.yaml" / "new", "--preset", "sample"],
+                                            tmp / "scenes" / "camera.yaml"), ["is a file"]),
+    "events-window-nan": (_events_case("a.npz", _events, "--window", "nan", names_option=True), ["--window"]),
+    "events-window-negative": (_events_case("a.npz", _events, "--window", "-3", names_option=True), ["--window"]),
+    "events-window-1e12": (_events_case("a.npz", _events, "--window", "1e12", names_option=True), ["--window"]),
+    "events-start-inf": (_events_case("a.npz", _events, "--start", "inf", names_option=True), ["--start"]),
+    "events-hot-pixels-nan": (_events_case("a.npz", _events, "--hot-pixels", "nan", names_option=True), ["--hot-pixels"]),
+    "events-size-huge": (_events_case("a.npz", _events, "--size", "100000x100000", names_option=True), ["100000x100000"]),
+    "events-start-past-end": (_events_case("a.npz", _events, "--start", "100"), ["no events in the window"]),
+}
+
+def _serve_case(*options: str, out_file: bool = False) -> Callable[[Path], list]:
+    def build(tmp: Path) -> list:
+        extra = []
+        if out_file:
+            (tmp / "taken").write_text("x")
+            extra = ["--out", tmp / "taken"]
+        return ["--scenes", tmp / "scenes", *options, *extra], options[0] if options else tmp / "taken"
+    return build
+
+
+SERVE_CASES = {
+    "serve-host-unresolvable": (_serve_case("--host", "no-such-host.invalid"), ["does not resolve"]),
+    "serve-host-bad-address": (_serve_case("--host", "256.1.1.1"), ["does not resolve"]),
+    "serve-port-0": (_serve_case("--port", "0"), ["1..65535"]),
+    "serve-out-is-a-file": (_serve_case(out_file=True), ["not a folder"]),
+    "synth-out-is-a-file": (lambda tmp: (["synth", "--out", tmp / "scenes" / "camera.yaml", "--preset", "sample"],
+                                         tmp / "scenes" / "camera.yaml"), ["not a folder"]),
+    "synth-out-not-empty": (lambda tmp: (["synth", "--out", tmp / "scenes", "--preset", "sample"], tmp / "scenes"),
+                            ["not empty"]),
+}
+
+ALL_CASES = {**SERVE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
@@ -334,3 +611,87 @@ def test_unwritable_output_keeps_the_result(tmp: Path) -> None:
     assert saved.parent == tmp and saved.name.startswith("l2e_studio_result.unsaved-") and saved.suffix == ".yaml"
     assert load_seed(saved).error_to(load_seed(tmp / "scenes" / "camera.yaml"))[0] < 5  # a real result
     assert "T_cam_lidar" in yaml.safe_load(saved.read_text())
+
+
+def test_unresolvable_host_fails_within_seconds(tmp: Path) -> None:
+    run = run_cli("--host", "no-such-host.invalid", "--scenes", tmp / "scenes", cwd=tmp)
+    assert_one_line_error(run, "--host")
+    assert run.seconds < 15
+
+
+def test_non_loopback_host_prints_a_warning_with_the_real_url(tmp: Path, monkeypatch, capsys) -> None:
+    import l2e_studio.app.server as server_module
+    from l2e_studio.cli import main
+
+    class FakeApp:
+        url = "http://127.0.0.1:8123"
+        server = type("S", (), {"get_port": staticmethod(lambda: 8123)})()
+
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    assert main(["--host", "0.0.0.0", "--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: --host 0.0.0.0 exposes the workbench" in err and ":8123" in err and str(tmp / "o") in err
+    assert f"http://{_outbound()}:8123 can use it" in err  # the address other machines reach, not 127.0.0.1
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    assert main(["--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def _outbound() -> str:
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("192.0.2.1", 9))
+            return probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
+
+
+@pytest.mark.parametrize("message, mi", [("Inequality constraints incompatible", 0.5),
+                                         ("Singular matrix E in LSQ subproblem", 0.5),
+                                         ("Optimization terminated successfully", float("nan"))])
+def test_a_failing_optimiser_is_an_error_not_a_result(tmp: Path, monkeypatch, capsys, message, mi) -> None:
+    import dataclasses
+
+    import l2e_studio.calibrate as engine
+    from l2e_studio.cli import main
+
+    real = engine.calibrate
+
+    def broken(*args, **kwargs):
+        return dataclasses.replace(real(*args, **kwargs), message=message, score_result=mi)
+
+    monkeypatch.setattr(engine, "calibrate", broken)
+    code = main(["calibrate", "--scenes", str(tmp / "scenes"), "--single-stage", "--quiet", "--out", str(tmp / "r.yaml")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert code == 2 and len(err) == 1 and "the optimiser failed" in err[0]
+    assert not (tmp / "r.yaml").exists()
+    monkeypatch.setattr(engine, "calibrate", real)
+    assert main(["calibrate", "--scenes", str(tmp / "scenes"), "--single-stage", "--quiet",
+                 "--out", str(tmp / "r.yaml")]) == 0
+
+
+@pytest.mark.parametrize("name", sorted(n for n in SEED_CASES if n not in ("seed-missing",)))
+def test_the_app_upload_path_refuses_the_same_seeds(name: str, tmp: Path) -> None:
+    """The browser's seed upload parses with the same loaders: the same bad files are one
+    InputError line naming the upload (what the app shows as a notification), nothing else."""
+    from l2e_studio.app.files import seed_from_upload
+    from l2e_studio.errors import InputError
+
+    build, fragments = SEED_CASES[name]
+    _, path = build(tmp)
+    with pytest.raises(InputError) as info:
+        seed_from_upload(path.name, path.read_bytes())
+    line = str(info.value)
+    assert line.startswith(path.name + ": ") and "\n" not in line
+    for frag in fragments:
+        assert frag in line
+
+
+def test_a_huge_upload_is_refused_before_parsing() -> None:
+    from l2e_studio.app.files import seed_from_upload
+    from l2e_studio.errors import InputError
+
+    with pytest.raises(InputError, match="big.yaml: is 200.0 MiB"):
+        seed_from_upload("big.yaml", b"#" * (200 * 2**20))

@@ -129,13 +129,15 @@ def test_accumulate_window_counts_every_polarity(tmp_path: Path) -> None:
         accumulate_events(path, window_s=1.0, start_s=50.0)
 
 
-def test_unknown_size_grows_and_explicit_size_crops(tmp_path: Path, events) -> None:
+def test_unknown_size_grows_and_a_too_small_size_is_refused(tmp_path: Path, events) -> None:
+    """Events outside an explicit size are counted: a crop of most of them is an error, not a map."""
     x, y, t, p = events
     np.savez(tmp_path / "a.npz", x=x, y=y, t=t, p=p)
     grown = accumulate_events(tmp_path / "a.npz", window_s=100, clip=None, chunk_size=500)
     assert grown.shape == (y.max() + 1, x.max() + 1) and grown.sum() == t.size
-    small = accumulate_events(tmp_path / "a.npz", window_s=100, clip=None, width=100, height=50)
-    assert small.shape == (50, 100) and small.sum() == np.count_nonzero((x < 100) & (y < 50))
+    outside = np.count_nonzero((x >= 100) | (y >= 50))
+    with pytest.raises(InputError, match=f"{outside} of {t.size} events in the window fall outside the 100x50 sensor"):
+        accumulate_events(tmp_path / "a.npz", window_s=100, clip=None, width=100, height=50)
 
 
 def test_hot_pixels_are_zeroed() -> None:

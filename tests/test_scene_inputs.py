@@ -44,3 +44,28 @@ def test_seed_coverage_counts_points_in_the_image(small_synth) -> None:
     flipped = Extrinsic.from_rpy([0, 180, 0], [0, 0, 0]).compose(truth)
     with pytest.raises(InputError, match="seed.yaml: .* behind the camera"):
         check_seed_coverage(pts, camera, flipped, "seed.yaml")
+
+
+def test_a_non_utf8_file_name_loads_and_is_cached(scene_dir_copy: Path) -> None:
+    import os
+
+    for sub, ext in (("lidar", "txt"), ("event", "png")):
+        os.rename(scene_dir_copy / sub / f"scene_000.{ext}", os.fsencode(scene_dir_copy / sub) + f"/scene_\xff.{ext}".encode("latin-1"))
+    for _ in range(2):  # the second load reads the scan cache
+        ss = load_scene_folder(scene_dir_copy)
+        assert "scene_\udcff" in ss.names and not ss.failures
+    assert any(p.name.startswith("scene_\udcff.txt.") for p in (scene_dir_copy / ".l2e_cache").iterdir())
+
+
+def test_extract_refuses_clouds_without_intensity(tmp_path: Path, monkeypatch) -> None:
+    """A cloud with no intensity field is an error naming the bag, not an all-zero intensity scan."""
+    import l2e_studio.io.lidar as lidar
+    from l2e_studio.io.bags import ExtractSettings, extract_bag
+    from test_bags import _write
+
+    bag = tmp_path / "a.bag"
+    _write(bag, ros2=False)
+    monkeypatch.setattr(lidar, "INTENSITY_NAMES", ())  # the bag's "intensity" field is not recognised
+    with pytest.raises(InputError, match="a.bag: the point clouds have no intensity field"):
+        extract_bag(bag, tmp_path / "out", ExtractSettings())
+    assert not list((tmp_path / "out").rglob("*.pcd"))

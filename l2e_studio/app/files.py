@@ -22,6 +22,7 @@ from ..export import dumps, extrinsic_to_dict, result_to_dict, write_result
 from ..geometry import Extrinsic
 from ..io.cameras import load_seed
 from .heldout import HeldOutScore, held_out_section
+from ..io.safe_load import MAX_DOCUMENT_BYTES
 from .overlay import encode_png
 
 SEED_SUFFIXES = (".yaml", ".yml", ".json", ".txt", ".npy")
@@ -111,6 +112,8 @@ def seed_from_upload(name: str, content: bytes) -> Extrinsic:
     suffix = Path(name).suffix.lower()
     if suffix not in SEED_SUFFIXES:
         raise InputError(name, f"unsupported seed file type {suffix or '(none)'}; expected one of {', '.join(SEED_SUFFIXES)}")
+    if len(content) > MAX_DOCUMENT_BYTES:  # refused before it is written anywhere or parsed
+        raise InputError(name, f"is {len(content) / 2**20:.1f} MiB; a seed file is at most {MAX_DOCUMENT_BYTES // 2**20} MiB")
     with tempfile.TemporaryDirectory(prefix="l2e_seed_") as tmp:
         path = Path(tmp) / Path(name).name
         path.write_bytes(content)

@@ -66,6 +66,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         print(f"l2e-studio: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a file system refusal the command did not foresee: still one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"l2e-studio: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("l2e-studio: error: out of memory (the input is larger than this machine can hold)", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("l2e-studio: interrupted", file=sys.stderr)
         return 130

@@ -18,6 +18,7 @@ pixels firing far above the rest. The sensor size comes from the file, ``--size 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..errors import InputError
@@ -85,6 +86,15 @@ def _stem(path: Path) -> str:
     return path.name[: -len(suffix)]
 
 
+def check_options(args: argparse.Namespace) -> None:
+    """Refuse NaN, infinite or absurd windows, starts and hot-pixel sigmas with one line."""
+    from ..limits import MAX_WINDOW_S, require_range
+
+    require_range("--window", args.window, 0.0, MAX_WINDOW_S, low_inclusive=False)
+    require_range("--start", args.start, 0.0, MAX_WINDOW_S)
+    require_range("--hot-pixels", args.hot_pixels, 0.0, 1000.0, low_inclusive=False)
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.progress import Progress
@@ -92,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from ..io.events import EVENT_SUFFIXES, accumulate_events_cached
     from ..io.maps import write_map_png
 
+    check_options(args)
     folder: Path = args.folder
     if not folder.is_dir():
         raise InputError(folder, "scene folder not found")
@@ -100,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(folder, f"no raw event files in events_raw/ or event/ ({', '.join(EVENT_SUFFIXES)})")
     width, height = _size(args, folder)
     console = Console(stderr=True)
-    written = cached = skipped = failed = 0
+    written = cached = skipped = 0
+    failures: list[InputError] = []
     with Progress(console=console, transient=True) as progress:
         task = progress.add_task("accumulating", total=len(to_png) + len(in_place))
         for path in to_png + in_place:
@@ -109,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if path in to_png and out.exists() and not args.force:
                     skipped += 1
-                    console.print(f"kept existing {out} (use --force to rebuild)")
+                    console.print(f"kept existing {out} (use --force to rebuild)", highlight=False)
                 else:
                     image = accumulate_events_cached(path, window_s=args.window, start_s=args.start,
                                                      hot_pixel_sigma=args.hot_pixels, width=width, height=height)
@@ -119,11 +131,15 @@ def run(args: argparse.Namespace) -> int:
                     else:
                         cached += 1
                     console.print(f"{path.name}: {image.shape[1]}x{image.shape[0]}, "
-                                  f"{int((image > 0).sum())} firing pixels, max {image.max():.0f}")
+                                  f"{int((image > 0).sum())} firing pixels, max {image.max():.0f}", highlight=False)
             except InputError as exc:
-                failed += 1
-                console.print(f"[red]skipped[/red] {exc}")
+                failures.append(exc)
             progress.advance(task)
+    if failures and not (written or cached or skipped):
+        more = f" (and {len(failures) - 1} more file(s) failed)" if len(failures) > 1 else ""
+        raise InputError(None, f"{failures[0]}{more}")
+    for exc in failures:
+        print(f"warning: skipped {exc}", file=sys.stderr)
     print(f"{written} map(s) written to {folder / 'event'}, {cached} cached in place, "
-          f"{skipped} kept, {failed} failed")
-    return 1 if failed and not (written or cached) else 0
+          f"{skipped} kept, {len(failures)} failed")
+    return 0

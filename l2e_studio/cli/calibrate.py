@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -100,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)
 
-    if not (math.isfinite(result.score_result) and math.isfinite(result.score_seed)):
-        raise InputError(None, f"the optimiser failed ({result.message or 'non-finite score'}); no result was written")
+    failure = optimiser_failure(result)
+    if failure:
+        raise InputError(None, f"the optimiser failed ({failure}); no result was written")
     verdict = None
     if not args.no_verdict:
         with _progress(args.quiet, err) as prog:
@@ -138,19 +140,29 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: scipy messages of an optimiser that broke down (SLSQP modes 4-7, NaN objectives), as opposed
+#: to one that stopped on a tolerance or an iteration limit.
+FAILURE_MESSAGES = re.compile(r"incompatible|singular matrix|rank-deficient|\bnan\b|more equality constraints", re.I)
+
+
+def optimiser_failure(result) -> str | None:
+    """Why ``result`` is not a result (a non-finite score, a broken-down optimiser), or None."""
+    if not (math.isfinite(result.score_result) and math.isfinite(result.score_seed)):
+        return f"non-finite {result.objective} score: seed {result.score_seed}, result {result.score_result}"
+    message = str(result.message or "")
+    if FAILURE_MESSAGES.search(message):
+        return message
+    return None
+
+
 def _settings(args: argparse.Namespace):
     """The engine's settings; bounds and sigma outside a sane range (or NaN) are refused here."""
     from ..calibrate import CalibrationSettings
-    from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M, check_range
+    from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M, require_range
 
-    for option, value, low, high, low_ok in (
-        ("--bound-m", args.bound_m, 0.0, MAX_TRANSLATION_BOUND_M, True),
-        ("--bound-deg", args.bound_deg, 0.0, MAX_ROTATION_BOUND_DEG, False),
-        ("--sigma", args.sigma, 0.0, MAX_SIGMA_PX, True),
-    ):
-        if not check_range(value, low, high, low_ok):
-            raise InputError(None, f"{option} must be a finite number in {'[' if low_ok else '('}{low:g}, {high:g}], "
-                                   f"got {value:g}")
+    require_range("--bound-m", args.bound_m, 0.0, MAX_TRANSLATION_BOUND_M)
+    require_range("--bound-deg", args.bound_deg, 0.0, MAX_ROTATION_BOUND_DEG, low_inclusive=False)
+    require_range("--sigma", args.sigma, 0.0, MAX_SIGMA_PX)
     try:
         return CalibrationSettings(
             method=args.method,

@@ -55,6 +55,15 @@ def run(args: argparse.Namespace) -> int:
         if not args.list:
             raise InputError(None, "give --out DIR to extract scenes (topics listed above)")
         return 0
+    from ..limits import MAX_WINDOW_S, require_range
+
+    require_range("--window", args.window, 0.0, MAX_WINDOW_S, low_inclusive=False)
+    require_range("--start", args.start, 0.0, MAX_WINDOW_S)
+    require_range("--slice", args.slice, 0.0, MAX_WINDOW_S, low_inclusive=False)
+    require_range("--scans", args.scans, 1, 1000)
+    from .outputs import check_output_dir
+
+    check_output_dir(args.out)
     width, height = parse_size(args.size) if args.size else (None, None)
     settings = ExtractSettings(args.event_topic, args.lidar_topic, args.slice, args.window, args.start,
                                max(1, args.scans), args.intensity_field, width, height)

@@ -6,6 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+#: Seconds a host name may take to resolve before --host is reported as unresolvable.
+RESOLVE_TIMEOUT_S = 5.0
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
 NAME = "serve"
 HELP = "Serve the browser workbench (the default command): l2e-studio --scenes DIR"
 
@@ -32,6 +36,11 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 < args.port < 65536:
         raise InputError(None, f"--port must be 1..65535, got {args.port}")
+    resolve_host(args.host)
+    if args.out is not None:
+        from .outputs import check_output_dir
+
+        check_output_dir(args.out)
     folder = args.scenes if args.scenes is not None else sample_scenes_dir()
     print(f"Loading scenes from {folder} ...", flush=True)
     scene_set = load_scene_folder(folder, seed_file=args.seed, camera_file=args.camera)
@@ -47,12 +56,52 @@ def run(args: argparse.Namespace) -> int:
         if port != args.port:
             print(f"  port {args.port} is busy; serving on {port} instead", flush=True)
         print(f"L2E Studio is running at {app.url}  (Ctrl+C to stop)", flush=True)
-        if args.host in ("127.0.0.1", "localhost", "::1"):
+        if args.host not in LOOPBACK:
+            print(exposure_warning(args.host, port, out), file=sys.stderr, flush=True)
+        if args.host in LOOPBACK:
             print(f"  remote machine? forward the port: ssh -L {port}:127.0.0.1:{port} <host>, "
                   f"then open http://127.0.0.1:{port}", flush=True)
 
+    out = args.out if args.out is not None or args.scenes is not None else Path("l2e_results")
     try:
         serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
     except OSError as exc:
         raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
     return 0
+
+
+def resolve_host(host: str, timeout: float = RESOLVE_TIMEOUT_S) -> list[str]:
+    """The addresses ``host`` resolves to; :class:`InputError` within ``timeout`` seconds otherwise."""
+    import concurrent.futures
+    import socket
+
+    from ..errors import InputError
+
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    try:
+        infos = pool.submit(socket.getaddrinfo, host, None, 0, socket.SOCK_STREAM).result(timeout=timeout)
+    except concurrent.futures.TimeoutError:
+        raise InputError(None, f"--host {host!r} did not resolve within {timeout:g} s") from None
+    except (socket.gaierror, UnicodeError, OSError) as exc:
+        raise InputError(None, f"--host {host!r} does not resolve ({getattr(exc, 'strerror', None) or exc})") from None
+    finally:
+        pool.shutdown(wait=False)
+    return sorted({info[4][0] for info in infos})
+
+
+def exposure_warning(host: str, port: int, out: Path | None) -> str:
+    """One line saying what binding to a non-loopback ``host`` exposes, with the URL others use."""
+    import socket
+
+    shown = host
+    if host in ("0.0.0.0", "::", ""):  # every interface: show the address other machines route to
+        shown = socket.gethostname()
+        try:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.connect(("192.0.2.1", 9))  # TEST-NET: nothing is sent, the kernel picks the interface
+                shown = probe.getsockname()[0]
+        except OSError:
+            pass
+    where = f" and can write files into {out}" if out is not None else ""
+    return (f"warning: --host {host} exposes the workbench to the network: anyone who can reach "
+            f"http://{shown}:{port} can use it{where}; prefer the default 127.0.0.1 with an SSH tunnel")

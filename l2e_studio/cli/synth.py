@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     from ..synth import check_out_dir, make_rig, write_dataset
+    from .outputs import check_output_dir
 
     err = Console(stderr=True)
     try:
@@ -66,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         err.print(f"l2e-studio synth: error: {exc}", highlight=False)
         return 2
+    check_output_dir(args.out)
     check_out_dir(args.out, args.force)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TimeRemainingColumn())

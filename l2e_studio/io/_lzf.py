@@ -3,7 +3,7 @@
 LZF is a byte-oriented LZ77 variant: a control byte below 32 starts a literal run of
 ``ctrl + 1`` bytes; otherwise its top 3 bits are a match length (7 = "read one more length
 byte") and its low 5 bits plus the next byte a back-reference distance. Uses the ``lzf`` C
-extension (PyPI ``python-lzf``) when it is installed, this loop otherwise.
+extension (PyPI ``python-neo-lzf``, a dependency; ``python-lzf`` provides the same module) when it is installed, this loop otherwise.
 """
 
 from __future__ import annotations
@@ -14,8 +14,14 @@ except ImportError:  # pragma: no cover - depends on the environment
     _c_lzf = None
 
 
+#: LZF's largest expansion: 3 input bytes (a long back-reference) give at most 264 output bytes.
+MAX_RATIO = 88
+
+
 def decompress(data: bytes, size: int) -> bytes:
     """Decompress ``data`` to exactly ``size`` bytes; ValueError when it is corrupt."""
+    if size > MAX_RATIO * len(data) + 1024:
+        raise ValueError(f"{len(data)} compressed bytes cannot expand to {size}")
     if _c_lzf is not None:
         out = _c_lzf.decompress(bytes(data), size + 1)
         if out is None or len(out) != size:

@@ -218,6 +218,9 @@ def extract_bag(
         image, n_events = _accumulate(bag, sl, settings)
         merged = {k: np.concatenate([c[k] for c in sl.clouds if k in c]) for k in sl.clouds[0]}
         scan = _finish(bag, merged, settings.intensity_field)
+        if not scan.has_intensity:  # an all-zero field would look like a scan and calibrate nothing
+            raise InputError(bag, f"the point clouds have no intensity field (fields: {', '.join(merged)}); "
+                                  "pass --intensity-field NAME")
         map_path = write_map_png(out / "event" / f"{stem}.png", image)
         lidar_path = write_lidar_pcd(out / "lidar" / f"{stem}.pcd", scan.points, scan.intensity)
         scenes.append(ExtractedScene(stem, map_path, lidar_path, n_events, len(scan)))

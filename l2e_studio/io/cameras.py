@@ -37,7 +37,7 @@ from ..camera import CameraModel
 from ..errors import InputError
 from ..geometry import Extrinsic
 from ..limits import MAX_IMAGE_SIDE, ROTATION_TOLERANCE
-from .safe_load import MAX_DOCUMENT_BYTES, parse_json, parse_yaml, read_text_capped
+from .safe_load import MAX_DOCUMENT_BYTES, load_npy, parse_json, parse_yaml, read_text_capped
 
 #: ROS / OpenCV / Kalibr distortion model names -> ours.
 MODEL_NAMES = {
@@ -104,7 +104,9 @@ def load_seed(path: str | Path) -> Extrinsic:
         if path.stat().st_size > MAX_DOCUMENT_BYTES:
             raise InputError(path, f"a seed matrix file is at most {MAX_DOCUMENT_BYTES // 2**20} MiB")
         try:
-            return _extrinsic_from_matrix(path, np.load(path, allow_pickle=False))
+            return _extrinsic_from_matrix(path, load_npy(path))
+        except InputError:
+            raise
         except (ValueError, OSError) as exc:
             raise InputError(path, f"cannot read the .npy matrix ({exc})") from exc
     if path.is_file() and path.stat().st_size < 1_000_000:
@@ -328,12 +330,18 @@ def _seed_from_mapping(path: Path, d: dict) -> Extrinsic | None:
         if "rotvec" in d:
             return Extrinsic(_vector(path, d["rotvec"], "seed rotvec", (3,)), t)
         if "quaternion_xyzw" in d:
-            return Extrinsic.from_quaternion(_vector(path, d["quaternion_xyzw"], "seed quaternion", (4,)), t)
+            q = _vector(path, d["quaternion_xyzw"], "seed quaternion", (4,))
+            if abs(float(np.linalg.norm(q)) - 1) > ROTATION_TOLERANCE:
+                raise InputError(path, f"seed quaternion_xyzw has norm {np.linalg.norm(q):.4g}; a rotation is a unit "
+                                       f"quaternion (tolerance {ROTATION_TOLERANCE:g})")
+            return Extrinsic.from_quaternion(q, t)
         if "rpy_deg" in d:
             return Extrinsic.from_rpy(_vector(path, d["rpy_deg"], "seed rpy_deg", (3,)), t)
         if "rotation_matrix" in d:
             R = _matrix(path, d["rotation_matrix"], (3, 3), "seed rotation_matrix")
             return _extrinsic_from_matrix(path, np.column_stack([R, t]))
+    except InputError:
+        raise
     except ValueError as exc:
         raise InputError(path, f"bad seed ({exc})") from None
     raise InputError(path, "seed has a translation but no rotvec, quaternion_xyzw, rpy_deg or matrix")

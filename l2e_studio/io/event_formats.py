@@ -96,6 +96,15 @@ def _polarity(p: np.ndarray) -> np.ndarray:
 def _coords(path: Path, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x)
     y = np.asarray(y)
+    if not all(np.issubdtype(a.dtype, np.number) and a.ndim == 1 for a in (x, y)):
+        raise InputError(path, f"event coordinates must be 1-D numbers, got {x.dtype} {x.shape} and {y.dtype} {y.shape}")
+    if x.size and not (np.issubdtype(x.dtype, np.integer) and np.issubdtype(y.dtype, np.integer)):
+        bad = int(np.count_nonzero(~(np.isfinite(x) & np.isfinite(y))))
+        if bad:
+            raise InputError(path, f"{bad} of {x.size} events have NaN or infinite coordinates")
+        frac = int(np.count_nonzero((x != np.round(x)) | (y != np.round(y))))
+        if frac:
+            raise InputError(path, f"{frac} of {x.size} events have fractional pixel coordinates")
     if x.size and (x.min() < 0 or y.min() < 0):
         raise InputError(path, "negative event coordinates")
     if x.size and (x.max() > 65535 or y.max() > 65535):

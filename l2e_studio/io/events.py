@@ -36,12 +36,15 @@ import numpy as np
 from ..cachedir import user_cache_dir
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
+from ..limits import MAX_BACKWARD_STEP_US, MAX_EVENT_SENSOR_SIDE
 from . import event_prophesee as prophesee
 
 #: Suffixes of raw event recordings (``.txt`` only inside an event folder; ``.npy`` may also be a 2D map).
 EVENT_SUFFIXES: tuple[str, ...] = (".raw", ".dat", ".aedat4", ".h5", ".hdf5", ".npz", ".npy", ".txt")
 
 DEFAULT_CHUNK = 2_000_000
+#: More than this share of a window's events outside the sensor is an error, not a silent crop.
+MAX_OUTSIDE_FRACTION = 0.001
 CACHE_SUFFIX = ".l2ecache.npz"
 _CACHE_VERSION = 1
 
@@ -75,8 +78,11 @@ def iter_events(path: str | Path, chunk_size: int = DEFAULT_CHUNK) -> Iterator[E
     if path.stat().st_size == 0:
         raise InputError(path, "the event file is empty")
     try:
+        t_max, seen = None, 0
         for x, y, t, p in _decoder(path, suffix, chunk_size):
             if len(t):
+                t_max = _check_time_order(path, t, t_max, seen)
+                seen += len(t)
                 yield EventChunk(x, y, t, p)
     except InputError:
         raise
@@ -84,17 +90,34 @@ def iter_events(path: str | Path, chunk_size: int = DEFAULT_CHUNK) -> Iterator[E
         raise InputError(path, f"cannot decode {suffix} events ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from exc
 
 
+def _check_time_order(path: Path, t: np.ndarray, t_max: int | None, seen: int) -> int:
+    """Refuse times that step back more than :data:`MAX_BACKWARD_STEP_US` (a window cut from the
+    first event would silently drop the rest); returns the running maximum."""
+    running = np.maximum.accumulate(t if t_max is None else np.maximum(t, t_max))
+    back = running - t
+    worst = int(np.argmax(back))
+    if back[worst] > MAX_BACKWARD_STEP_US:
+        raise InputError(path, f"event times run backwards at event {seen + worst} ({int(t[worst])} us after "
+                               f"{int(running[worst])} us): the recording is not time-ordered; sort it by time first")
+    return int(running[-1])
+
+
 def sensor_size(path: str | Path) -> tuple[int, int] | None:
-    """(width, height) as the file states it, or None when it does not say."""
+    """(width, height) as the file states it, or None when it does not say; an absurd size is an error."""
     path = Path(path)
     suffix = event_suffix(path)
     if suffix is None or not path.is_file():
         return None
     if suffix in (".raw", ".dat"):
-        return prophesee.read_header(path).size
-    from . import event_formats
+        size = prophesee.read_header(path).size
+    else:
+        from . import event_formats
 
-    return event_formats.sensor_size(path, suffix)
+        size = event_formats.sensor_size(path, suffix)
+    if size is not None and not all(0 < v <= MAX_EVENT_SENSOR_SIDE for v in size):
+        raise InputError(path, f"the file states a {size[0]}x{size[1]} sensor; event sensors are at most "
+                               f"{MAX_EVENT_SENSOR_SIDE} pixels a side")
+    return size
 
 
 def _decoder(path: Path, suffix: str, chunk_size: int):
@@ -172,8 +195,12 @@ def accumulate_events(
     path = Path(path)
     if window_s <= 0:
         raise ValueError(f"window_s must be positive, got {window_s}")
-    size = (int(width), int(height)) if width is not None and height is not None else sensor_size(path)
-    counter = _Counter(size)
+    declared = sensor_size(path)
+    size = (int(width), int(height)) if width is not None and height is not None else declared
+    if declared is not None and size != declared:
+        raise InputError(path, f"the file states a {declared[0]}x{declared[1]} sensor but the camera is "
+                               f"{size[0]}x{size[1]}; events would be cropped or misplaced")
+    counter = _Counter(size, path)
     begin = end = None
     for c in iter_events(path, chunk_size):
         if begin is None:
@@ -186,6 +213,10 @@ def accumulate_events(
             break
     if counter.total == 0:
         raise InputError(path, _empty_window_message(begin, start_s, window_s))
+    if counter.outside > MAX_OUTSIDE_FRACTION * (counter.total + counter.outside):
+        W, H = counter.grid.shape[1], counter.grid.shape[0]
+        raise InputError(path, f"{counter.outside} of {counter.total + counter.outside} events in the window fall "
+                               f"outside the {W}x{H} sensor; wrong --size or camera, or damaged data")
     image = counter.grid.astype(np.float64)
     if hot_pixel_sigma is not None:
         image = suppress_hot_pixels(image, hot_pixel_sigma)
@@ -197,11 +228,13 @@ def accumulate_events(
 class _Counter:
     """Per-pixel event counts; a fixed size drops events outside it, no size grows to fit."""
 
-    def __init__(self, size: tuple[int, int] | None) -> None:
+    def __init__(self, size: tuple[int, int] | None, path: Path | None = None) -> None:
         self.fixed = size is not None
+        self.path = path
         w, h = size if size is not None else (0, 0)
         self.grid = np.zeros((h, w), np.int64)
         self.total = 0
+        self.outside = 0  # events dropped outside a fixed size
 
     def add(self, x: np.ndarray, y: np.ndarray) -> None:
         x = x.astype(np.int64)
@@ -209,9 +242,13 @@ class _Counter:
         H, W = self.grid.shape
         if self.fixed:
             inside = (x < W) & (y < H)
+            self.outside += int(x.size - np.count_nonzero(inside))
             x, y = x[inside], y[inside]
         else:
             h_new, w_new = max(H, int(y.max()) + 1), max(W, int(x.max()) + 1)
+            if max(h_new, w_new) > MAX_EVENT_SENSOR_SIDE:
+                raise InputError(self.path, f"events at x={int(x.max())}, y={int(y.max())} and no sensor size in the "
+                                            f"file: beyond any event sensor ({MAX_EVENT_SENSOR_SIDE} px); pass --size WxH")
             if (h_new, w_new) != (H, W):
                 grown = np.zeros((h_new, w_new), np.int64)
                 grown[:H, :W] = self.grid
@@ -306,5 +343,8 @@ def parse_size(text: str) -> tuple[int, int]:
     """``"1280x720"`` -> (1280, 720); :class:`InputError` (a ValueError) naming the text otherwise."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX, ]\s*(\d+)\s*", text)
     if not m:
-        raise InputError(None, f"expected a size like 1280x720, got {text!r}")
-    return int(m.group(1)), int(m.group(2))
+        raise InputError(None, f"--size expects a size like 1280x720, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (0 < w <= MAX_EVENT_SENSOR_SIDE and 0 < h <= MAX_EVENT_SENSOR_SIDE):
+        raise InputError(None, f"--size must be 1..{MAX_EVENT_SENSOR_SIDE} pixels a side, got {text!r}")
+    return w, h

@@ -44,12 +44,14 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
+from .safe_load import load_npy
 
 #: No lidar measures this far (metres); a binary scan full of such values is not a scan.
 MAX_RANGE_M = 10_000.0
 
 #: File suffixes :func:`load_lidar` reads (``.pcd.bin`` is matched before ``.bin``).
-LIDAR_SUFFIXES: tuple[str, ...] = (".txt", ".csv", ".xyz", ".pcd", ".ply", ".pcd.bin", ".bin", ".npy", ".npz")
+LIDAR_SUFFIXES: tuple[str, ...] = (".txt", ".csv", ".xyz", ".pcd", ".ply", ".pcd.bin", ".bin", ".npy", ".npz",
+                                   ".las", ".laz")
 
 #: Field names recognised as intensity, in order of preference.
 INTENSITY_NAMES: tuple[str, ...] = ("intensity", "reflectivity", "reflectance", "i", "signal", "remission", "scalar_intensity")
@@ -292,6 +294,13 @@ def _read_pcd(path: Path) -> dict[str, np.ndarray]:
         csize, usize = np.frombuffer(body[:8], dtype="<u4")
         if len(body) < 8 + int(csize):
             raise InputError(path, f"truncated binary_compressed PCD: {len(body) - 8} of {int(csize)} compressed bytes")
+        point_bytes = sum(np.dtype("<" + code).itemsize * count for _, code, count in dtypes)
+        if int(usize) != npoints * point_bytes:
+            raise InputError(path, f"binary_compressed PCD: {int(usize)} uncompressed bytes declared, but "
+                                   f"{npoints} points x {point_bytes} bytes = {npoints * point_bytes}")
+        if int(usize) > _lzf.MAX_RATIO * int(csize) + 1024:
+            raise InputError(path, f"binary_compressed PCD: {int(csize)} compressed bytes cannot hold the "
+                                   f"{int(usize)} declared (LZF expands at most {_lzf.MAX_RATIO}x)")
         try:
             raw = _lzf.decompress(body[8: 8 + int(csize)], int(usize))
         except ValueError as exc:
@@ -437,7 +446,7 @@ def _from_array(path: Path, arr: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _read_npy(path: Path) -> dict[str, np.ndarray]:
-    return _from_array(path, np.load(path, allow_pickle=False))
+    return _from_array(path, load_npy(path))
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
@@ -456,8 +465,37 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
     raise InputError(path, f"npz holds {keys}; expected 'points' or 'x','y','z' arrays")
 
 
+#: A LAZ file's points expand at most this much (LASzip reaches 5-15x on real scans).
+MAX_LAZ_RATIO = 100
+
+
+def _read_las(path: Path) -> dict[str, np.ndarray]:
+    """LAS / LAZ through ``laspy`` (LAZ with its ``lazrs`` backend): scaled x, y, z and intensity.
+
+    The header's point count is checked against the file size before anything is decompressed.
+    """
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            header = reader.header
+            n, record = int(header.point_count), int(header.point_format.size)
+            body = path.stat().st_size - int(header.offset_to_point_data)
+            compressed = path.suffix.lower() == ".laz" or header.are_points_compressed
+            if n * record > body * (MAX_LAZ_RATIO if compressed else 1):
+                raise InputError(path, f"the header declares {n} points of {record} bytes, more than the "
+                                       f"{body} bytes of point data can hold")
+            las = reader.read()
+    except laspy.errors.LaspyException as exc:
+        raise InputError(path, f"cannot read the LAS/LAZ file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    fields = {"x": np.asarray(las.x), "y": np.asarray(las.y), "z": np.asarray(las.z)}
+    if "intensity" in las.point_format.dimension_names:
+        fields["intensity"] = np.asarray(las.intensity)
+    return fields
+
+
 _READERS = {
     ".txt": _read_text, ".csv": _read_text, ".xyz": _read_text,
     ".pcd": _read_pcd, ".ply": _read_ply, ".pcd.bin": _read_nuscenes, ".bin": _read_kitti,
-    ".npy": _read_npy, ".npz": _read_npz,
+    ".npy": _read_npy, ".npz": _read_npz, ".las": _read_las, ".laz": _read_las,
 }

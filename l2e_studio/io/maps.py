@@ -26,6 +26,8 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
+from ..limits import MAX_IMAGE_SIDE
+from .safe_load import load_npy
 
 #: Image suffixes read as maps. Raw event suffixes (``EVENT_SUFFIXES``) are accepted as well.
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".exr")
@@ -100,7 +102,7 @@ def load_map(
     if not path.is_file():
         raise InputError(path, "map file not found")
     if suffix in IMAGE_SUFFIXES:
-        image, channels = _read_image(path)
+        image, channels = _read_image(path, width, height)
     elif suffix == ".npy" and is_map_npy(path):
         image, channels = _read_npy_map(path), 1
     else:
@@ -120,10 +122,23 @@ def load_map(
     return image, kind
 
 
-def _read_image(path: Path) -> tuple[np.ndarray, int]:
+def png_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk, without decoding it; None for other formats."""
+    if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def _read_image(path: Path, width: int | None = None, height: int | None = None) -> tuple[np.ndarray, int]:
     data = np.fromfile(path, dtype=np.uint8)
     if data.size == 0:
         raise InputError(path, "the image file is empty")
+    declared = png_size(data[:24].tobytes())
+    if declared is not None:  # refuse before decoding: a small PNG can declare gigapixels
+        w, h = declared
+        if not (0 < w <= MAX_IMAGE_SIDE and 0 < h <= MAX_IMAGE_SIDE):
+            raise InputError(path, f"the PNG declares {w}x{h} pixels; at most {MAX_IMAGE_SIDE} a side are read")
+        _check_size(path, np.empty((h, w, 0)), width, height)
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputError(path, "cannot decode the image (corrupt, truncated or not an image)")
@@ -154,7 +169,7 @@ def is_map_npy(path: Path) -> bool:
 
 
 def _read_npy_map(path: Path) -> np.ndarray:
-    arr = np.load(path, allow_pickle=False)
+    arr = load_npy(path)
     if not np.issubdtype(arr.dtype, np.number):
         raise InputError(path, f"map array has non-numeric dtype {arr.dtype}")
     arr = arr.astype(np.float32)

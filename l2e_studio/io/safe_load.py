@@ -107,3 +107,26 @@ def parse_json(path: Path, text: str) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(path, f"invalid JSON ({exc.msg} at line {exc.lineno})") from None
+
+
+def load_npy(path: Path) -> "np.ndarray":
+    """``np.load`` of a plain .npy after checking that the file holds the data its header declares
+    (``np.load`` allocates the declared array first: a 200-byte file can ask for gigabytes)."""
+    import numpy as np
+
+    try:
+        with path.open("rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read_header(fh)
+            available = path.stat().st_size - fh.tell()
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, f"cannot read the .npy header ({exc})") from None
+    declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if not dtype.hasobject and declared > available:
+        raise InputError(path, f"the .npy header declares {shape} {dtype} ({declared} bytes) but the file holds "
+                               f"{available} bytes of data")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(path, f"cannot read the .npy file ({str(exc).splitlines()[0]})") from None
