@@ -149,3 +149,31 @@ def test_panels_never_import_the_server_module():
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
                 assert not (node.module or "").endswith("server"), f"{path.name} imports {node.module}"
+
+
+def test_previews_are_display_sized_and_settle_fires_once_after_quiet():
+    import threading
+    import time
+
+    from l2e_studio.app.panels.overlay_view import DISPLAY_WIDTH, display_sized
+    from l2e_studio.app.workers import Settle
+
+    big = np.zeros((720, 1280, 3), np.uint8)
+    assert display_sized(big).shape == (360, DISPLAY_WIDTH, 3)
+    small = np.zeros((180, 320, 3), np.uint8)
+    assert display_sized(small) is small
+
+    fired = []
+    done = threading.Event()
+    settle = Settle("t", lambda: (fired.append(time.monotonic()), done.set()), quiet=0.15)
+    try:
+        t0 = time.monotonic()
+        for _ in range(5):  # a burst: one call, 0.15 s after the last poke
+            settle.poke()
+            time.sleep(0.05)
+        last = time.monotonic()
+        assert done.wait(2.0)
+        time.sleep(0.3)
+        assert len(fired) == 1 and fired[0] - last >= 0.1 and fired[0] - t0 < 2.0
+    finally:
+        settle.stop()

@@ -3,6 +3,8 @@ switching, seed files, display controls and results, checked through the shared 
 
 from __future__ import annotations
 
+import time
+
 from types import SimpleNamespace
 
 import numpy as np
@@ -69,6 +71,9 @@ def test_gizmo_and_sliders_edit_the_same_extrinsic(app):
     app.extrinsic.sliders[0].value = float(app.extrinsic.sliders[0].value) + 0.05
     app.extrinsic._on_slider(user(), 0)
     w2, p2 = camera_pose(app.state.snapshot().extrinsic)
+    deadline = time.monotonic() + 5  # the gizmo follows slider moves once they rest (0.3 s)
+    while not np.allclose(app.view3d.gizmo.position, p2) and time.monotonic() < deadline:
+        time.sleep(0.02)
     assert np.allclose(app.view3d.gizmo.position, p2) and not np.allclose(p2, pos)
 
 

@@ -3,6 +3,7 @@ projected at the current extrinsic, and the display controls."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from ..context import Workbench
@@ -13,7 +14,17 @@ from ..state import Snapshot
 from ..text import num
 
 JPEG_QUALITY = 80
+DISPLAY_WIDTH = 640  # px: about the overlay's width on the page at 1366x768 (previews are sent at this size)
+PREVIEW_JPEG_QUALITY = 50  # a moving preview: ~60 KB per update per tab; the frame at rest uses JPEG_QUALITY
 PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
+
+
+def display_sized(image: np.ndarray, width: int = DISPLAY_WIDTH) -> np.ndarray:
+    """``image`` shrunk to ``width`` pixels wide (area averaging); unchanged when not wider."""
+    h, w = image.shape[:2]
+    if w <= width:
+        return image
+    return cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
 
 
 class OverlayPanel:
@@ -25,6 +36,7 @@ class OverlayPanel:
         cam = app.camera
         self.panel = gui.add_panel()
         self.frames = 0
+        self.full_frame = True  # whether the last frame sent was full size
         with self.panel.add_tab("Overlay"):
             # Stretch the overlay images to the panel's width (viser shows images at most at
             # their own size; small maps would otherwise stay small).
@@ -69,8 +81,13 @@ class OverlayPanel:
         colors = disp.colors() if style.color_by == "intensity" else None
         return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
 
-    def render(self, snap: Snapshot) -> None:
-        self.image.image = self.draw(snap.selected, snap.shown_extrinsic)
+    def render(self, snap: Snapshot, full: bool = True) -> None:
+        """Draw the overlay; ``full=False`` sends a display-sized preview (while controls move)."""
+        image = self.draw(snap.selected, snap.shown_extrinsic)
+        # viser 1.1 has no public per-frame quality; its handle reads this attribute when encoding
+        self.image._jpeg_quality = JPEG_QUALITY if full else PREVIEW_JPEG_QUALITY
+        self.image.image = image if full else display_sized(image)
+        self.full_frame = full
         self.frames += 1
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
