@@ -232,3 +232,65 @@ def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
     field.fill("")
     page.get_by_text("cannot be empty").first.wait_for()
     assert app.out_dir == inside
+
+
+def image_natural_width(page, index: int = 0) -> int:
+    return page.evaluate(f"() => document.querySelectorAll(\"img[src^='blob:']\")[{index}].naturalWidth")
+
+
+def test_zoom_by_click_legend_and_edge_view(page, app):
+    cam = app.camera
+    page.get_by_text("lidar intensity (scaled to 0..255)").first.wait_for()
+    img = page.locator("img[src^='blob:']").first
+    box = img.bounding_box()
+    img.click(position={"x": box["width"] * 0.25, "y": box["height"] * 0.5})
+    wait_for(lambda: app.overlay.zoom.value == "2x", what="a click zooms in")
+    assert app.overlay.centre == pytest.approx((0.25 * cam.width, 0.5 * cam.height), abs=cam.width * 0.02)
+    labelled_zoom = page.locator("label", has_text="Zoom").first.get_attribute("for")
+    page.locator(f"[id='{labelled_zoom}']").click()
+    page.get_by_role("option", name="4x").click()
+    wait_for(lambda: app.overlay.window is not None and app.overlay.window.width == 160, what="a 4x window")
+    w = app.overlay.window
+    assert w.x0 == pytest.approx(0.25 * cam.width - 80, abs=3)  # centred on the click
+    wait_for(lambda: image_natural_width(page) == 640, what="the zoomed frame: 160 map px at 4x")
+    screenshot(page, "16_zoom_4x")
+    # a click on the zoomed image pans: the centre moves to the clicked map pixel
+    box = img.bounding_box()
+    img.click(position={"x": box["width"] * 0.75, "y": box["height"] * 0.5})
+    wait_for(lambda: app.overlay.centre[0] == pytest.approx(w.x0 + 0.75 * w.width, abs=3), what="pan by click")
+    # depth colouring: the legend gives the depth span in metres
+    labelled_colour = page.locator("label", has_text="Colour by").first.get_attribute("for")
+    page.locator(f"[id='{labelled_colour}']").click()
+    page.get_by_role("option", name="depth").click()
+    page.get_by_text("m (near)").first.wait_for()
+    # edge view
+    labelled_view = page.locator("label", has_text="View").first.get_attribute("for")
+    page.locator(f"[id='{labelled_view}']").click()
+    page.get_by_role("option", name="edges").click()
+    page.get_by_text("depth edges of the projected points").first.wait_for()
+    page.locator(f"[id='{labelled_zoom}']").click()
+    page.get_by_role("option", name="fit").click()
+    wait_for(lambda: image_natural_width(page) == cam.width, what="the whole map again")
+    screenshot(page, "17_edge_view")
+
+
+def test_swipe_line_follows_a_drag_on_the_image(page, app):
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    open_tab(page, "Before / after")
+    app.compare.mode.value = "swipe"
+    wait_for(lambda: app.compare.frames >= 1 and app.compare.image.visible, what="the swipe image")
+    img = page.locator("img[src^='blob:']").nth(1)
+    img.wait_for()
+    box = img.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] * 0.2, y)
+    page.mouse.down()
+    for f in np.linspace(0.2, 0.7, 8):
+        page.mouse.move(box["x"] + box["width"] * f, y)
+        time.sleep(0.08)
+    page.mouse.up()
+    wait_for(lambda: app.compare.amount.value == pytest.approx(0.7, abs=0.03), what="the swipe at 70 %")
+    screenshot(page, "18_swipe_dragged")

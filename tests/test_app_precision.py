@@ -177,3 +177,32 @@ def test_previews_are_display_sized_and_settle_fires_once_after_quiet():
         assert len(fired) == 1 and fired[0] - last >= 0.1 and fired[0] - t0 < 2.0
     finally:
         settle.stop()
+
+
+def test_zoom_windows_are_native_resolution_and_clamped_to_the_map():
+    from l2e_studio.app.inspect import Window, legend_html, zoom_window, zoomed
+
+    shape = (720, 1280, 3)
+    assert zoom_window(shape, "fit", (0, 0), 640) == Window(0, 0, 1280, 720)
+    w = zoom_window(shape, "1:1", (640, 360), 640)
+    assert (w.width, w.height) == (640, 360) and (w.x0, w.y0) == (320, 180)
+    corner = zoom_window(shape, "4x", (5, 5), 640)  # clamped inside the map
+    assert (corner.x0, corner.y0, corner.width) == (0, 0, 160)
+    img = np.arange(720 * 1280 * 3, dtype=np.uint32).reshape(shape).astype(np.uint8)
+    z = zoomed(img, corner, "4x")
+    assert z.shape == (corner.height * 4, 640, 3) and np.array_equal(z[::4, ::4], img[: corner.height, :160])
+    assert corner.to_map(0.5, 0.5) == (80.0, corner.height / 2)
+    assert "1.5 m (near)" in legend_html("depth", (1.5, 30.0)) and "intensity" in legend_html("intensity")
+
+
+def test_edge_view_marks_map_edges_and_depth_edges():
+    from l2e_studio.app.inspect import edge_view
+
+    m = np.zeros((60, 80), np.float32)
+    m[:, 40:] = 1.0  # one vertical map edge at x = 40
+    ys, xs = np.mgrid[0:60:1, 0:80:1]
+    uv = np.stack([xs.ravel(), ys.ravel()], 1).astype(float)
+    depth = np.where(xs.ravel() < 40, 2.0, 10.0)  # a depth step at the same place
+    out = edge_view(m, uv, depth)
+    white = np.all(out == 255, axis=2)
+    assert white[:, 36:44].any() and not white[:, :30].any()
