@@ -294,3 +294,23 @@ def test_swipe_line_follows_a_drag_on_the_image(page, app):
     page.mouse.up()
     wait_for(lambda: app.compare.amount.value == pytest.approx(0.7, abs=0.03), what="the swipe at 70 %")
     screenshot(page, "18_swipe_dragged")
+
+
+def test_scene_rows_select_and_toggle_and_the_table_sorts(page, app):
+    page.get_by_role("cell", name="scene_002").first.click()
+    wait_for(lambda: app.state.snapshot().selected == 2, what="a row click selects the scene")
+    row = page.get_by_role("row").filter(has_text="scene_001").first
+    row.get_by_role("cell").first.click()
+    wait_for(lambda: app.state.snapshot().included == (True, False, True, True), what="the ✓ cell toggles inclusion")
+    page.get_by_text("Optimising over 3 of 4 scenes").first.wait_for()
+    wait_for(lambda: app.reading is not None, what="MI")
+    sort_id = page.locator("label", has_text="Sort by").first.get_attribute("for")
+    page.locator(f"[id='{sort_id}']").click()
+    page.get_by_role("option", name="MI now (low first)").click()
+    expected = [app.state.scene_names[i] for i in np.argsort(app.reading.per_scene)]
+
+    def shown() -> list[str]:
+        return [r.strip().strip("*") for r in page.locator("tbody tr td:nth-child(2)").all_inner_texts()]
+
+    wait_for(lambda: shown() == expected, what=f"rows in MI order {expected}")
+    screenshot(page, "19_scene_table_sorted")

@@ -206,3 +206,14 @@ def test_edge_view_marks_map_edges_and_depth_edges():
     out = edge_view(m, uv, depth)
     white = np.all(out == 255, axis=2)
     assert white[:, 36:44].any() and not white[:, :30].any()
+
+
+def test_scene_order_sorts_by_name_points_and_mi():
+    from l2e_studio.app.panels.scenes import scene_order
+
+    names, points, mi = ["b", "a", "c"], [10, 30, 20], np.array([0.2, np.nan, 0.5])
+    assert scene_order("name", names, points, mi) == [1, 0, 2]
+    assert scene_order("points", names, points, mi) == [1, 2, 0]
+    assert scene_order("MI now (high first)", names, points, mi) == [2, 0, 1]  # NaN last
+    assert scene_order("MI now (low first)", names, points, mi) == [0, 2, 1]
+    assert scene_order("MI now (low first)", names, points, None) == [1, 0, 2]

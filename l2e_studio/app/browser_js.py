@@ -7,6 +7,8 @@
 - A click (or, where allowed, a drag) on an image that follows a :func:`pointer_marker` writes
   ``"fx, fy, stamp"`` (fractions of the image's width and height) into the text field the
   marker names; the server reads it from there (viser has no image click events).
+- A click on a row of the scene table (first header cell "use") writes ``select:<scene>`` (or
+  ``toggle:<scene>`` on the first cell) into the hidden "Scene pointer" field.
 
 viser renders ``add_html`` content with ``innerHTML``, where a ``<script>`` never runs; an
 ``<img onerror>`` handler does, so the script hangs off a tiny broken image. It installs its
@@ -61,6 +63,14 @@ if (!window.__l2eKeys) {
     setField(marker.dataset.l2ePointer, fx.toFixed(4) + ', ' + fy.toFixed(4) + ', ' + Math.round(now));
     e.preventDefault();
   };
+  document.addEventListener('click', (e) => {
+    const tr = e.target instanceof Element && e.target.closest('tbody tr');
+    const table = tr && tr.closest('table');
+    const head = table && table.querySelector('th');
+    if (!head || head.textContent.trim() !== 'use' || tr.cells.length < 2) return;
+    const action = e.target.closest('td') === tr.cells[0] ? 'toggle' : 'select';
+    setField('Scene pointer', action + ':' + tr.cells[1].textContent.trim() + ',' + Math.round(performance.now()));
+  }, true);
   document.addEventListener('pointerdown', (e) => onPointer(e, false), true);
   document.addEventListener('pointermove', (e) => { if (e.buttons & 1) onPointer(e, true); }, true);
   document.addEventListener('dragstart', (e) => { if (e.target instanceof HTMLImageElement) e.preventDefault(); }, true);
