@@ -314,3 +314,49 @@ def test_scene_rows_select_and_toggle_and_the_table_sorts(page, app):
 
     wait_for(lambda: shown() == expected, what=f"rows in MI order {expected}")
     screenshot(page, "19_scene_table_sorted")
+
+
+def test_pnp_seed_from_pairs_picked_in_3d_and_clicked_on_the_overlay(page, app):
+    from types import SimpleNamespace
+
+    from l2e_studio.geometry import project_points
+    from l2e_studio.io.cameras import load_seed
+
+    truth = load_seed(app.scene_set.root / "truth.yaml")
+    cam = app.camera
+    pts = app.displays[0].scene.points
+    uv, front = project_points(truth.transform(pts), cam)
+    inside = np.flatnonzero(front & (uv[:, 0] > 20) & (uv[:, 0] < cam.width - 20) & (uv[:, 1] > 20)
+                            & (uv[:, 1] < cam.height - 20))
+    rng = np.random.default_rng(0)
+    chosen = [int(i) for i in rng.choice(inside, 6, replace=False)]
+    open_tab(page, "Seed")
+    page.get_by_text("Initial guess from clicked pairs").click()
+    img = page.locator("img[src^='blob:']").first
+    for k in chosen:
+        page.get_by_role("button", name="Pick a pair").click()
+        wait_for(lambda: app.pairs.armed, what="picking armed")
+        # the 3D click: a ray from the sensor through the point, as viser reports it
+        app.pairs._on_scene_click(SimpleNamespace(ray_origin=(0.0, 0.0, 0.0), ray_direction=tuple(pts[k])))
+        assert app.pairs.pending == pytest.approx(tuple(pts[k]))
+        page.get_by_text("Now click the same spot").first.wait_for()
+        box = img.bounding_box()
+        img.click(position={"x": float((uv[k, 0] + 0.5) / cam.width * box["width"]),
+                            "y": float((uv[k, 1] + 0.5) / cam.height * box["height"])})
+        wait_for(lambda: not app.pairs.armed, what="the pixel completes the pair")
+    assert app.overlay.zoom.value == "fit"  # the clicks went to the pairs, not to the zoom
+    pairs = app.pairs.pairs()
+    assert len(pairs) == 6
+    seed_err = truth.error_to(app.state.snapshot().extrinsic)
+    page.get_by_role("button", name="Solve PnP").click()
+    page.get_by_text("PnP over 6 pairs").first.wait_for()
+    err_deg, err_m = truth.error_to(app.state.snapshot().extrinsic)
+    assert err_deg < max(0.5, seed_err[0]) and err_m < 0.1, (err_deg, err_m, seed_err)
+    screenshot(page, "20_pnp_pairs")
+    # one undo step back to the seed; the pairs are saved with the seed file
+    page.get_by_role("button", name="Undo").click()
+    wait_for(lambda: truth.error_to(app.state.snapshot().extrinsic)[0] == pytest.approx(seed_err[0]), what="undo")
+    page.get_by_role("button", name="Save seed").click()
+    saved = wait_for(lambda: list(app.out_dir.glob("seed_*.yaml")), what="a seed file")
+    doc = yaml.safe_load(saved[0].read_text())
+    assert len(doc["pairs"]) == 6 and doc["pairs"][0]["lidar_m"] == pytest.approx(list(pairs[0].point))

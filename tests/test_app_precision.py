@@ -169,12 +169,12 @@ def test_previews_are_display_sized_and_settle_fires_once_after_quiet():
     try:
         t0 = time.monotonic()
         for _ in range(5):  # a burst: one call, 0.15 s after the last poke
-            settle.poke()
             time.sleep(0.05)
-        last = time.monotonic()
+            settle.poke()
+            last = time.monotonic()
         assert done.wait(2.0)
         time.sleep(0.3)
-        assert len(fired) == 1 and fired[0] - last >= 0.1 and fired[0] - t0 < 2.0
+        assert len(fired) == 1 and fired[0] - last >= 0.14 and fired[0] - t0 < 2.0
     finally:
         settle.stop()
 
@@ -217,3 +217,28 @@ def test_scene_order_sorts_by_name_points_and_mi():
     assert scene_order("MI now (high first)", names, points, mi) == [2, 0, 1]  # NaN last
     assert scene_order("MI now (low first)", names, points, mi) == [0, 2, 1]
     assert scene_order("MI now (low first)", names, points, None) == [1, 0, 2]
+
+
+def test_pnp_from_four_or_more_pairs_recovers_the_extrinsic():
+    from l2e_studio.app.pairs import Pair, nearest_point_to_ray, reprojection_errors, solve_pnp
+    from l2e_studio.camera import CameraModel
+    from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES, project_points
+
+    K = np.array([[500.0, 0, 320], [0, 500.0, 180], [0, 0, 1]])
+    cam = CameraModel(K, 640, 360, D=np.array([-0.05, 0.01, 0.0, 0.0, 0.0]))
+    T = np.eye(4)
+    T[:3, :3] = LIDAR_TO_CAMERA_AXES
+    T[:3, 3] = (0.05, -0.1, 0.02)
+    truth = Extrinsic.from_matrix(T).perturbed([0.01, 0.02, -0.01], [0.02, -0.01, 0.03])
+    pts = np.array([[6, 1, 0.5], [8, -2, 1], [5, 0.5, -0.7], [10, 3, 0.2], [7, -1, -1.0], [9, 2, 1.5]], float)
+    uv, _ = project_points(truth.transform(pts), cam)
+    pairs = [Pair(tuple(p), tuple(q)) for p, q in zip(pts, uv)]
+    with pytest.raises(ValueError):
+        solve_pnp(pairs[:3], cam)
+    got = solve_pnp(pairs, cam)
+    assert np.allclose(got.params, truth.params, atol=1e-6)
+    assert np.all(reprojection_errors(got, pairs, cam) < 1e-4)
+    assert reprojection_errors(Extrinsic.from_matrix(T), pairs, cam).max() > 5
+    # picking: the ray from the origin through point 3 finds point 3
+    assert nearest_point_to_ray(pts, (0, 0, 0), pts[3]) == 3
+    assert nearest_point_to_ray(pts, (0, 0, 0), (0, 0, -1)) is None

@@ -25,9 +25,11 @@ from ..scenes import SceneSet
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
+from .pairs import Pair
 from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
+from .panels.pairs import PairsPanel
 from .panels.overlay_view import OverlayPanel
 from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
@@ -76,6 +78,7 @@ class App:
             self.scenes = ScenesPanel(self)
         with tabs.add_tab("Seed", viser.Icon.ADJUSTMENTS):
             self.extrinsic = ExtrinsicPanel(self)
+            self.pairs = PairsPanel(self)
         with tabs.add_tab("Optimise", viser.Icon.PLAYER_PLAY):
             self.optimise = OptimisePanel(self)
         with tabs.add_tab("Result", viser.Icon.CHECKLIST):
@@ -128,6 +131,7 @@ class App:
             elif source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
+            self.pairs.show()
         self.overlay_worker.poke()
         self.mi_worker.poke()
 
@@ -149,6 +153,17 @@ class App:
         """A display control moved (colour, size, opacity, contrast, map)."""
         self.overlay_worker.poke()
         self.compare_worker.poke()
+
+    def image_clicked(self, x: float, y: float) -> bool:
+        """A click on the overlay at map pixel (x, y); True when a pair being picked took it."""
+        if self.pairs.wants_pixel():
+            self.pairs.pixel_picked(x, y)
+            return True
+        return False
+
+    def current_pairs(self) -> list[Pair]:
+        """The clicked lidar/pixel pairs (saved with the seed)."""
+        return self.pairs.pairs()
 
     def compare_changed(self) -> None:
         """A before/after control moved."""

@@ -146,12 +146,12 @@ class ExtrinsicPanel:
     def _on_save(self, event) -> None:
         ext = self.app.state.snapshot().extrinsic
         try:
-            path = save_seed(self.app.out_dir, ext)
+            path = save_seed(self.app.out_dir, ext, self.app.current_pairs())
         except OSError as exc:
             self.app.notify(event.client, "Seed not saved", f"{self.app.out_dir}: {exc}", color="red")
             return
         if event.client is not None:
-            event.client.send_file_download(path.name, seed_document(ext))
+            event.client.send_file_download(path.name, seed_document(ext, pairs=self.app.current_pairs()))
         self.app.notify(event.client, "Seed saved", str(path), color="green")
 
     # --- refresh from the state ------------------------------------------------------------

@@ -155,7 +155,10 @@ class OverlayPanel:
         xy = _pair(self.pointer.value)
         if event.client is None or xy is None or self.window is None:
             return
-        self.centre = self.window.to_map(*xy)
+        x, y = self.window.to_map(*xy)
+        if self.app.image_clicked(x, y):  # a pair being picked takes the click
+            return
+        self.centre = (x, y)
         self.centre_in.value = f"{self.centre[0]:.0f}, {self.centre[1]:.0f}"
         if self.zoom.value == "fit":
             self.zoom.value = "2x"  # runs the display callback
