@@ -360,3 +360,28 @@ def test_pnp_seed_from_pairs_picked_in_3d_and_clicked_on_the_overlay(page, app):
     saved = wait_for(lambda: list(app.out_dir.glob("seed_*.yaml")), what="a seed file")
     doc = yaml.safe_load(saved[0].read_text())
     assert len(doc["pairs"]) == 6 and doc["pairs"][0]["lidar_m"] == pytest.approx(list(pairs[0].point))
+
+
+def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
+    from app_fixtures import new_context
+    from test_app_browser import open_app
+
+    contexts = [new_context(browser) for _ in range(5)]
+    try:
+        pages = [c.new_page() for c in contexts]
+        for p in pages:
+            open_app(p, app)
+            open_tab(p, "Optimise")
+        app.optimise.method.value = "Nelder-Mead"
+        pages[0].get_by_role("button", name="Start").click()
+        wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
+        t0 = time.monotonic()
+        pages[3].get_by_role("button", name="Cancel").click()
+        wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
+        seconds = time.monotonic() - t0
+        assert seconds < 1.0, f"cancel took {seconds:.2f} s with five tabs open"
+        for p in pages:  # every tab says so
+            p.get_by_text("Cancelled").first.wait_for()
+    finally:
+        for c in contexts:
+            c.close()
