@@ -44,7 +44,7 @@ log = logging.getLogger(__name__)
 TITLE = "L2E Studio"
 PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
 OVERLAY_REST_S = 0.3  # s without a change before the full-size overlay replaces the preview
-DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge"})  # rapid inputs: the gizmo follows at rest
+DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
 class App:
