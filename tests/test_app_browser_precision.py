@@ -375,11 +375,20 @@ def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
         app.optimise.method.value = "Nelder-Mead"
         pages[0].get_by_role("button", name="Start").click()
         wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
-        t0 = time.monotonic()
+        asked = []
+        real_cancel = app.cancel_run
+        app.cancel_run = lambda: (asked.append(time.time()), real_cancel())[1]
+        # the page stamps the click itself (epoch ms): Playwright's own checks before clicking
+        # take long in five software-rendered tabs on a busy machine, and are no part of the app
+        pages[3].evaluate("""() => document.addEventListener('click', () => {
+            window.__clicked = performance.timeOrigin + performance.now(); }, true)""")
         pages[3].get_by_role("button", name="Cancel").click()
         wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
-        seconds = time.monotonic() - t0
-        assert seconds < 1.0, f"cancel took {seconds:.2f} s with five tabs open"
+        stopped = time.time()
+        clicked = pages[3].evaluate("() => window.__clicked") / 1000.0
+        seconds, reached = stopped - clicked, asked[0] - clicked
+        assert seconds < 1.0, (f"cancel took {seconds:.2f} s with five tabs open "
+                               f"(the click reached the server after {reached:.2f} s)")
         for p in pages:  # every tab says so
             p.get_by_text("Cancelled").first.wait_for()
     finally:
