@@ -216,6 +216,7 @@ def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(p
     accept.wait_for()
     assert app.results.accept.color != "green"
     page.get_by_text("Run cancelled").first.wait_for()
+    screenshot(page, "15b_cancelled_result")
 
 
 def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
