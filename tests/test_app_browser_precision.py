@@ -216,6 +216,7 @@ def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(p
     accept.wait_for()
     assert app.results.accept.color != "green"
     page.get_by_text("Run cancelled").first.wait_for()
+    screenshot(page, "15b_cancelled_result")
 
 
 def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
@@ -232,3 +233,165 @@ def test_results_folder_is_shown_and_changeable(page, app, tmp_path):
     field.fill("")
     page.get_by_text("cannot be empty").first.wait_for()
     assert app.out_dir == inside
+
+
+def image_natural_width(page, index: int = 0) -> int:
+    return page.evaluate(f"() => document.querySelectorAll(\"img[src^='blob:']\")[{index}].naturalWidth")
+
+
+def test_zoom_by_click_legend_and_edge_view(page, app):
+    cam = app.camera
+    page.get_by_text("lidar intensity (scaled to 0..255)").first.wait_for()
+    img = page.locator("img[src^='blob:']").first
+    box = img.bounding_box()
+    img.click(position={"x": box["width"] * 0.25, "y": box["height"] * 0.5})
+    wait_for(lambda: app.overlay.zoom.value == "2x", what="a click zooms in")
+    assert app.overlay.centre == pytest.approx((0.25 * cam.width, 0.5 * cam.height), abs=cam.width * 0.02)
+    labelled_zoom = page.locator("label", has_text="Zoom").first.get_attribute("for")
+    page.locator(f"[id='{labelled_zoom}']").click()
+    page.get_by_role("option", name="4x").click()
+    wait_for(lambda: app.overlay.window is not None and app.overlay.window.width == 160, what="a 4x window")
+    w = app.overlay.window
+    assert w.x0 == pytest.approx(0.25 * cam.width - 80, abs=3)  # centred on the click
+    wait_for(lambda: image_natural_width(page) == 640, what="the zoomed frame: 160 map px at 4x")
+    screenshot(page, "16_zoom_4x")
+    # a click on the zoomed image pans: the centre moves to the clicked map pixel
+    box = img.bounding_box()
+    img.click(position={"x": box["width"] * 0.75, "y": box["height"] * 0.5})
+    wait_for(lambda: app.overlay.centre[0] == pytest.approx(w.x0 + 0.75 * w.width, abs=3), what="pan by click")
+    # depth colouring: the legend gives the depth span in metres
+    labelled_colour = page.locator("label", has_text="Colour by").first.get_attribute("for")
+    page.locator(f"[id='{labelled_colour}']").click()
+    page.get_by_role("option", name="depth").click()
+    page.get_by_text("m (near)").first.wait_for()
+    # edge view
+    labelled_view = page.locator("label", has_text="View").first.get_attribute("for")
+    page.locator(f"[id='{labelled_view}']").click()
+    page.get_by_role("option", name="edges").click()
+    page.get_by_text("depth edges of the projected points").first.wait_for()
+    page.locator(f"[id='{labelled_zoom}']").click()
+    page.get_by_role("option", name="fit").click()
+    wait_for(lambda: image_natural_width(page) == cam.width, what="the whole map again")
+    screenshot(page, "17_edge_view")
+
+
+def test_swipe_line_follows_a_drag_on_the_image(page, app):
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    open_tab(page, "Before / after")
+    app.compare.mode.value = "swipe"
+    wait_for(lambda: app.compare.frames >= 1 and app.compare.image.visible, what="the swipe image")
+    img = page.locator("img[src^='blob:']").nth(1)
+    img.wait_for()
+    box = img.bounding_box()
+    y = box["y"] + box["height"] / 2
+    page.mouse.move(box["x"] + box["width"] * 0.2, y)
+    page.mouse.down()
+    for f in np.linspace(0.2, 0.7, 8):
+        page.mouse.move(box["x"] + box["width"] * f, y)
+        time.sleep(0.08)
+    page.mouse.up()
+    wait_for(lambda: app.compare.amount.value == pytest.approx(0.7, abs=0.03), what="the swipe at 70 %")
+    screenshot(page, "18_swipe_dragged")
+
+
+def test_scene_rows_select_and_toggle_and_the_table_sorts(page, app):
+    page.get_by_role("cell", name="scene_002").first.click()
+    wait_for(lambda: app.state.snapshot().selected == 2, what="a row click selects the scene")
+    row = page.get_by_role("row").filter(has_text="scene_001").first
+    row.get_by_role("cell").first.click()
+    wait_for(lambda: app.state.snapshot().included == (True, False, True, True), what="the ✓ cell toggles inclusion")
+    page.get_by_text("Optimising over 3 of 4 scenes").first.wait_for()
+    wait_for(lambda: app.reading is not None, what="MI")
+    sort_id = page.locator("label", has_text="Sort by").first.get_attribute("for")
+    page.locator(f"[id='{sort_id}']").click()
+    page.get_by_role("option", name="MI now (low first)").click()
+    expected = [app.state.scene_names[i] for i in np.argsort(app.reading.per_scene)]
+
+    def shown() -> list[str]:
+        return [r.strip().strip("*") for r in page.locator("tbody tr td:nth-child(2)").all_inner_texts()]
+
+    wait_for(lambda: shown() == expected, what=f"rows in MI order {expected}")
+    screenshot(page, "19_scene_table_sorted")
+
+
+def test_pnp_seed_from_pairs_picked_in_3d_and_clicked_on_the_overlay(page, app):
+    from types import SimpleNamespace
+
+    from l2e_studio.geometry import project_points
+    from l2e_studio.io.cameras import load_seed
+
+    truth = load_seed(app.scene_set.root / "truth.yaml")
+    cam = app.camera
+    pts = app.displays[0].scene.points
+    uv, front = project_points(truth.transform(pts), cam)
+    inside = np.flatnonzero(front & (uv[:, 0] > 20) & (uv[:, 0] < cam.width - 20) & (uv[:, 1] > 20)
+                            & (uv[:, 1] < cam.height - 20))
+    rng = np.random.default_rng(0)
+    chosen = [int(i) for i in rng.choice(inside, 6, replace=False)]
+    open_tab(page, "Seed")
+    page.get_by_text("Initial guess from clicked pairs").click()
+    img = page.locator("img[src^='blob:']").first
+    for k in chosen:
+        page.get_by_role("button", name="Pick a pair").click()
+        wait_for(lambda: app.pairs.armed, what="picking armed")
+        # the 3D click: a ray from the sensor through the point, as viser reports it
+        app.pairs._on_scene_click(SimpleNamespace(ray_origin=(0.0, 0.0, 0.0), ray_direction=tuple(pts[k])))
+        assert app.pairs.pending == pytest.approx(tuple(pts[k]))
+        page.get_by_text("Now click the same spot").first.wait_for()
+        box = img.bounding_box()
+        img.click(position={"x": float((uv[k, 0] + 0.5) / cam.width * box["width"]),
+                            "y": float((uv[k, 1] + 0.5) / cam.height * box["height"])})
+        wait_for(lambda: not app.pairs.armed, what="the pixel completes the pair")
+    assert app.overlay.zoom.value == "fit"  # the clicks went to the pairs, not to the zoom
+    pairs = app.pairs.pairs()
+    assert len(pairs) == 6
+    seed_err = truth.error_to(app.state.snapshot().extrinsic)
+    page.get_by_role("button", name="Solve PnP").click()
+    page.get_by_text("PnP over 6 pairs").first.wait_for()
+    err_deg, err_m = truth.error_to(app.state.snapshot().extrinsic)
+    assert err_deg < max(0.5, seed_err[0]) and err_m < 0.1, (err_deg, err_m, seed_err)
+    screenshot(page, "20_pnp_pairs")
+    # one undo step back to the seed; the pairs are saved with the seed file
+    page.get_by_role("button", name="Undo").click()
+    wait_for(lambda: truth.error_to(app.state.snapshot().extrinsic)[0] == pytest.approx(seed_err[0]), what="undo")
+    page.get_by_role("button", name="Save seed").click()
+    saved = wait_for(lambda: list(app.out_dir.glob("seed_*.yaml")), what="a seed file")
+    doc = yaml.safe_load(saved[0].read_text())
+    assert len(doc["pairs"]) == 6 and doc["pairs"][0]["lidar_m"] == pytest.approx(list(pairs[0].point))
+
+
+def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
+    from app_fixtures import new_context
+    from test_app_browser import open_app
+
+    contexts = [new_context(browser) for _ in range(5)]
+    try:
+        pages = [c.new_page() for c in contexts]
+        for p in pages:
+            open_app(p, app)
+            open_tab(p, "Optimise")
+        app.optimise.method.value = "Nelder-Mead"
+        pages[0].get_by_role("button", name="Start").click()
+        wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
+        asked = []
+        real_cancel = app.cancel_run
+        app.cancel_run = lambda: (asked.append(time.time()), real_cancel())[1]
+        # the page stamps the click itself (epoch ms): Playwright's own checks before clicking
+        # take long in five software-rendered tabs on a busy machine, and are no part of the app
+        pages[3].evaluate("""() => document.addEventListener('click', () => {
+            window.__clicked = performance.timeOrigin + performance.now(); }, true)""")
+        pages[3].get_by_role("button", name="Cancel").click()
+        wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
+        stopped = time.time()
+        clicked = pages[3].evaluate("() => window.__clicked") / 1000.0
+        seconds, reached = stopped - clicked, asked[0] - clicked
+        assert seconds < 1.0, (f"cancel took {seconds:.2f} s with five tabs open "
+                               f"(the click reached the server after {reached:.2f} s)")
+        for p in pages:  # every tab says so
+            p.get_by_text("Cancelled").first.wait_for()
+    finally:
+        for c in contexts:
+            c.close()

@@ -149,3 +149,96 @@ def test_panels_never_import_the_server_module():
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
                 assert not (node.module or "").endswith("server"), f"{path.name} imports {node.module}"
+
+
+def test_previews_are_display_sized_and_settle_fires_once_after_quiet():
+    import threading
+    import time
+
+    from l2e_studio.app.panels.overlay_view import DISPLAY_WIDTH, display_sized
+    from l2e_studio.app.workers import Settle
+
+    big = np.zeros((720, 1280, 3), np.uint8)
+    assert display_sized(big).shape == (360, DISPLAY_WIDTH, 3)
+    small = np.zeros((180, 320, 3), np.uint8)
+    assert display_sized(small) is small
+
+    fired = []
+    done = threading.Event()
+    settle = Settle("t", lambda: (fired.append(time.monotonic()), done.set()), quiet=0.15)
+    try:
+        t0 = time.monotonic()
+        for _ in range(5):  # a burst: one call, 0.15 s after the last poke
+            time.sleep(0.05)
+            settle.poke()
+            last = time.monotonic()
+        assert done.wait(2.0)
+        time.sleep(0.3)
+        assert len(fired) == 1 and fired[0] - last >= 0.14 and fired[0] - t0 < 2.0
+    finally:
+        settle.stop()
+
+
+def test_zoom_windows_are_native_resolution_and_clamped_to_the_map():
+    from l2e_studio.app.inspect import Window, legend_html, zoom_window, zoomed
+
+    shape = (720, 1280, 3)
+    assert zoom_window(shape, "fit", (0, 0), 640) == Window(0, 0, 1280, 720)
+    w = zoom_window(shape, "1:1", (640, 360), 640)
+    assert (w.width, w.height) == (640, 360) and (w.x0, w.y0) == (320, 180)
+    corner = zoom_window(shape, "4x", (5, 5), 640)  # clamped inside the map
+    assert (corner.x0, corner.y0, corner.width) == (0, 0, 160)
+    img = np.arange(720 * 1280 * 3, dtype=np.uint32).reshape(shape).astype(np.uint8)
+    z = zoomed(img, corner, "4x")
+    assert z.shape == (corner.height * 4, 640, 3) and np.array_equal(z[::4, ::4], img[: corner.height, :160])
+    assert corner.to_map(0.5, 0.5) == (80.0, corner.height / 2)
+    assert "1.5 m (near)" in legend_html("depth", (1.5, 30.0)) and "intensity" in legend_html("intensity")
+
+
+def test_edge_view_marks_map_edges_and_depth_edges():
+    from l2e_studio.app.inspect import edge_view
+
+    m = np.zeros((60, 80), np.float32)
+    m[:, 40:] = 1.0  # one vertical map edge at x = 40
+    ys, xs = np.mgrid[0:60:1, 0:80:1]
+    uv = np.stack([xs.ravel(), ys.ravel()], 1).astype(float)
+    depth = np.where(xs.ravel() < 40, 2.0, 10.0)  # a depth step at the same place
+    out = edge_view(m, uv, depth)
+    white = np.all(out == 255, axis=2)
+    assert white[:, 36:44].any() and not white[:, :30].any()
+
+
+def test_scene_order_sorts_by_name_points_and_mi():
+    from l2e_studio.app.panels.scenes import scene_order
+
+    names, points, mi = ["b", "a", "c"], [10, 30, 20], np.array([0.2, np.nan, 0.5])
+    assert scene_order("name", names, points, mi) == [1, 0, 2]
+    assert scene_order("points", names, points, mi) == [1, 2, 0]
+    assert scene_order("MI now (high first)", names, points, mi) == [2, 0, 1]  # NaN last
+    assert scene_order("MI now (low first)", names, points, mi) == [0, 2, 1]
+    assert scene_order("MI now (low first)", names, points, None) == [1, 0, 2]
+
+
+def test_pnp_from_four_or_more_pairs_recovers_the_extrinsic():
+    from l2e_studio.app.pairs import Pair, nearest_point_to_ray, reprojection_errors, solve_pnp
+    from l2e_studio.camera import CameraModel
+    from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES, project_points
+
+    K = np.array([[500.0, 0, 320], [0, 500.0, 180], [0, 0, 1]])
+    cam = CameraModel(K, 640, 360, D=np.array([-0.05, 0.01, 0.0, 0.0, 0.0]))
+    T = np.eye(4)
+    T[:3, :3] = LIDAR_TO_CAMERA_AXES
+    T[:3, 3] = (0.05, -0.1, 0.02)
+    truth = Extrinsic.from_matrix(T).perturbed([0.01, 0.02, -0.01], [0.02, -0.01, 0.03])
+    pts = np.array([[6, 1, 0.5], [8, -2, 1], [5, 0.5, -0.7], [10, 3, 0.2], [7, -1, -1.0], [9, 2, 1.5]], float)
+    uv, _ = project_points(truth.transform(pts), cam)
+    pairs = [Pair(tuple(p), tuple(q)) for p, q in zip(pts, uv)]
+    with pytest.raises(ValueError):
+        solve_pnp(pairs[:3], cam)
+    got = solve_pnp(pairs, cam)
+    assert np.allclose(got.params, truth.params, atol=1e-6)
+    assert np.all(reprojection_errors(got, pairs, cam) < 1e-4)
+    assert reprojection_errors(Extrinsic.from_matrix(T), pairs, cam).max() > 5
+    # picking: the ray from the origin through point 3 finds point 3
+    assert nearest_point_to_ray(pts, (0, 0, 0), pts[3]) == 3
+    assert nearest_point_to_ray(pts, (0, 0, 0), (0, 0, -1)) is None

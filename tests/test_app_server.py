@@ -3,6 +3,8 @@ switching, seed files, display controls and results, checked through the shared 
 
 from __future__ import annotations
 
+import time
+
 from types import SimpleNamespace
 
 import numpy as np
@@ -69,6 +71,9 @@ def test_gizmo_and_sliders_edit_the_same_extrinsic(app):
     app.extrinsic.sliders[0].value = float(app.extrinsic.sliders[0].value) + 0.05
     app.extrinsic._on_slider(user(), 0)
     w2, p2 = camera_pose(app.state.snapshot().extrinsic)
+    deadline = time.monotonic() + 5  # the gizmo follows slider moves once they rest (0.3 s)
+    while not np.allclose(app.view3d.gizmo.position, p2) and time.monotonic() < deadline:
+        time.sleep(0.02)
     assert np.allclose(app.view3d.gizmo.position, p2) and not np.allclose(p2, pos)
 
 
@@ -179,3 +184,28 @@ def test_a_failing_run_is_reported_and_the_app_carries_on(app, monkeypatch):
     assert notes and notes[-1][0] == "Optimisation failed" and "fell over" in notes[-1][1]
     assert not app.optimise.start.disabled and app.optimise.cancel.disabled
     assert "Failed" in app.optimise.status.content
+
+
+def test_fine_gizmo_moves_a_tenth_and_catches_up_at_rest(app):
+    start = app.state.snapshot().extrinsic
+    wxyz, pos = camera_pose(start)
+    app.view3d.fine.value = True
+    app.view3d.gizmo.position = pos + np.array([0.10, 0.0, 0.0])  # a 10 cm drag in the lidar frame
+    app.view3d._on_gizmo(user())
+    moved = app.state.snapshot().extrinsic
+    _, pos2 = camera_pose(moved)
+    assert np.allclose(pos2 - pos, [0.01, 0.0, 0.0], atol=1e-9)  # a tenth of it
+    deadline = time.monotonic() + 5  # at rest the gizmo goes to the true pose
+    while not np.allclose(app.view3d.gizmo.position, pos2) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert np.allclose(app.view3d.gizmo.position, pos2)
+    # a rotation step is scaled too
+    from scipy.spatial.transform import Rotation
+
+    from l2e_studio.app.panels.view3d import scaled_gizmo_step
+
+    w0, p0 = camera_pose(start)
+    turned = Rotation.from_rotvec([0, 0, 0.2]) * Rotation.from_quat([w0[1], w0[2], w0[3], w0[0]])
+    x, y, z, w = turned.as_quat()
+    got = scaled_gizmo_step(start, (w0, p0), (np.array([w, x, y, z]), p0), 0.1)
+    assert start.error_to(got)[0] == pytest.approx(np.degrees(0.02), rel=1e-6)  # (deg, m): 0.2 rad / 10

@@ -4,6 +4,11 @@
   viser's 3D view moves its camera on arrow keys / WASD seen by ``document``; a listener on
   ``body`` stops those events after the control has handled them.
 - Ctrl+Z / Ctrl+Shift+Z / Ctrl+Y (outside text fields) click the Undo / Redo buttons.
+- A click (or, where allowed, a drag) on an image that follows a :func:`pointer_marker` writes
+  ``"fx, fy, stamp"`` (fractions of the image's width and height) into the text field the
+  marker names; the server reads it from there (viser has no image click events).
+- A click on a row of the scene table (first header cell "use") writes ``select:<scene>`` (or
+  ``toggle:<scene>`` on the first cell) into the hidden "Scene pointer" field.
 
 viser renders ``add_html`` content with ``innerHTML``, where a ``<script>`` never runs; an
 ``<img onerror>`` handler does, so the script hangs off a tiny broken image. It installs its
@@ -33,6 +38,42 @@ if (!window.__l2eKeys) {
   for (const type of ['keydown', 'keyup']) {
     document.body.addEventListener(type, (e) => { if (onControl(e.target)) e.stopPropagation(); });
   }
+  const setField = (label, text) => {
+    const lab = Array.from(document.querySelectorAll('label')).find(l => l.textContent.trim() === label);
+    const box = lab && lab.closest('.mantine-Flex-root');
+    const input = box && box.querySelector('input');
+    if (!input) return;
+    Object.getOwnPropertyDescriptor(HTMLInputElement.prototype, 'value').set.call(input, text);
+    input.dispatchEvent(new Event('input', {bubbles: true}));
+  };
+  let lastMove = 0;
+  const onPointer = (e, moving) => {
+    const img = e.target;
+    if (!(img instanceof HTMLImageElement) || !img.src.startsWith('blob:')) return;
+    let marker = null;
+    for (const m of document.querySelectorAll('[data-l2e-pointer]')) {
+      if (m.compareDocumentPosition(img) & Node.DOCUMENT_POSITION_FOLLOWING) marker = m;
+    }
+    if (!marker || (moving && marker.dataset.drag !== '1')) return;
+    const now = performance.now();
+    if (moving && now - lastMove < 60) return;
+    lastMove = now;
+    const r = img.getBoundingClientRect();
+    const fx = (e.clientX - r.left) / r.width, fy = (e.clientY - r.top) / r.height;
+    setField(marker.dataset.l2ePointer, fx.toFixed(4) + ', ' + fy.toFixed(4) + ', ' + Math.round(now));
+    e.preventDefault();
+  };
+  document.addEventListener('click', (e) => {
+    const tr = e.target instanceof Element && e.target.closest('tbody tr');
+    const table = tr && tr.closest('table');
+    const head = table && table.querySelector('th');
+    if (!head || head.textContent.trim() !== 'use' || tr.cells.length < 2) return;
+    const action = e.target.closest('td') === tr.cells[0] ? 'toggle' : 'select';
+    setField('Scene pointer', action + ':' + tr.cells[1].textContent.trim() + ',' + Math.round(performance.now()));
+  }, true);
+  document.addEventListener('pointerdown', (e) => onPointer(e, false), true);
+  document.addEventListener('pointermove', (e) => { if (e.buttons & 1) onPointer(e, true); }, true);
+  document.addEventListener('dragstart', (e) => { if (e.target instanceof HTMLImageElement) e.preventDefault(); }, true);
 }
 """
 
@@ -48,3 +89,18 @@ def hide_slider_boxes(uuids: list[str]) -> str:
     """CSS that hides the number box viser puts beside these sliders (their exact fields replace it)."""
     selectors = ", ".join(f"[id='{u}'] + *" for u in uuids)
     return f"<style>{selectors} {{ display: none !important; }}</style>" if uuids else ""
+
+
+def pointer_marker(field_label: str, drag: bool = False) -> str:
+    """An invisible marker: clicks on the next image go to the text field labelled ``field_label``."""
+    return (f"<span data-l2e-pointer='{html.escape(field_label, quote=True)}' data-drag='{1 if drag else 0}'></span>"
+            + KEY_HANDLING_HTML)
+
+
+def hide_inputs(handles: list) -> str:
+    """CSS that hides these viser inputs (label and field), e.g. the pointer fields."""
+    rules = []
+    for h in handles:
+        u = h._impl.uuid
+        rules.append(f"div:has(> div > div > p > label[for='{u}']), div:has(> div > p > label[for='{u}'])")
+    return "<style>" + ", ".join(rules) + " { display: none !important; }</style>" if rules else ""

@@ -90,20 +90,23 @@ def save_result(
     return path, png
 
 
-def seed_document(extrinsic: Extrinsic, note: str = "") -> bytes:
-    """A seed file (``seed:`` section of our camera.yaml) that :func:`load_seed` reads back."""
+def seed_document(extrinsic: Extrinsic, note: str = "", pairs: Sequence = ()) -> bytes:
+    """A seed file (``seed:`` section of our camera.yaml) that :func:`load_seed` reads back;
+    clicked ``pairs`` (lidar point, map pixel) go along under ``pairs``."""
     rep = extrinsic_to_dict(extrinsic)
     doc = {"seed": {"translation": rep["translation"], "rotvec": rep["rotvec"]},
            "as_matrix": {"T_cam_lidar": rep["T_cam_lidar"]}, "rpy_deg": rep["rpy_deg"]}
+    if pairs:
+        doc["pairs"] = [{"lidar_m": [float(a) for a in p.point], "pixel": [float(a) for a in p.pixel]} for p in pairs]
     header = "# Seed T_cam_lidar (X_cam = R X_lidar + t), written by the L2E Studio workbench.\n"
     if note:
         header += f"# {note}\n"
     return (header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)).encode()
 
 
-def save_seed(folder: Path, extrinsic: Extrinsic) -> Path:
+def save_seed(folder: Path, extrinsic: Extrinsic, pairs: Sequence = ()) -> Path:
     path = fresh_path(Path(folder), "seed", ".yaml")
-    atomic_write_bytes(path, seed_document(extrinsic))
+    atomic_write_bytes(path, seed_document(extrinsic, pairs=pairs))
     return path
 
 

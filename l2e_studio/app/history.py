@@ -14,7 +14,7 @@ from typing import Callable, Generic, TypeVar
 T = TypeVar("T")
 
 #: Sources whose bursts merge into one undo step.
-MERGING_SOURCES = frozenset({"sliders", "gizmo", "typed"})
+MERGING_SOURCES = frozenset({"sliders", "gizmo", "gizmo-fine", "typed"})
 
 
 class History(Generic[T]):

@@ -25,9 +25,11 @@ from ..scenes import SceneSet
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
+from .pairs import Pair
 from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
+from .panels.pairs import PairsPanel
 from .panels.overlay_view import OverlayPanel
 from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
@@ -35,12 +37,14 @@ from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .state import SessionState
 from .text import num
-from .workers import LatestWorker, Ticker
+from .workers import LatestWorker, Settle, Ticker
 
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
 PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
+OVERLAY_REST_S = 0.3  # s without a change before the full-size overlay replaces the preview
+DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
 class App:
@@ -74,6 +78,7 @@ class App:
             self.scenes = ScenesPanel(self)
         with tabs.add_tab("Seed", viser.Icon.ADJUSTMENTS):
             self.extrinsic = ExtrinsicPanel(self)
+            self.pairs = PairsPanel(self)
         with tabs.add_tab("Optimise", viser.Icon.PLAYER_PLAY):
             self.optimise = OptimisePanel(self)
         with tabs.add_tab("Result", viser.Icon.CHECKLIST):
@@ -81,7 +86,10 @@ class App:
         self.compare = ComparePanel(self, self.overlay)
         self.view3d = View3D(self)
 
+        self._want_full = True  # the next overlay frame is full size (at start, and at rest)
+        self._pose_3d_pending = False
         self.overlay_worker = LatestWorker("overlay", self._render_overlay)
+        self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
         self.compare_worker = LatestWorker("compare", self.compare.render)
         self.refresh()
@@ -118,9 +126,12 @@ class App:
     def _show_extrinsic(self, extrinsic: Extrinsic, source: str, values: np.ndarray | None = None) -> None:
         with self._ui_lock:
             self.extrinsic.show(extrinsic, values, source)
-            if source != "gizmo":
+            if source in DEFERRED_3D_SOURCES:
+                self._pose_3d_pending = True  # the 3D view follows once the input rests
+            elif source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
+            self.pairs.show()
         self.overlay_worker.poke()
         self.mi_worker.poke()
 
@@ -142,6 +153,17 @@ class App:
         """A display control moved (colour, size, opacity, contrast, map)."""
         self.overlay_worker.poke()
         self.compare_worker.poke()
+
+    def image_clicked(self, x: float, y: float) -> bool:
+        """A click on the overlay at map pixel (x, y); True when a pair being picked took it."""
+        if self.pairs.wants_pixel():
+            self.pairs.pixel_picked(x, y)
+            return True
+        return False
+
+    def current_pairs(self) -> list[Pair]:
+        """The clicked lidar/pixel pairs (saved with the seed)."""
+        return self.pairs.pairs()
 
     def compare_changed(self) -> None:
         """A before/after control moved."""
@@ -175,9 +197,24 @@ class App:
     def _render_overlay(self) -> None:
         t0 = time.perf_counter()
         snap = self.state.snapshot()
-        self.overlay.render(snap)
+        full, self._want_full = self._want_full, False
+        self.overlay.render(snap, full=full)
+        if not full:
+            self.overlay_settle.poke()
         self.overlay_seconds.append(time.perf_counter() - t0)
         del self.overlay_seconds[:-200]
+
+    def _overlay_at_rest(self) -> None:
+        """Nothing moved for a moment: send the full-size frame (previews are display-sized),
+        and pose the 3D camera (redrawing the 3D view on every step of a drag costs a browser
+        without a GPU hundreds of milliseconds, and would delay the overlay)."""
+        if self._pose_3d_pending:
+            with self._ui_lock:
+                self._pose_3d_pending = False
+                self.view3d.show_pose(self.state.snapshot().extrinsic)
+        if not self.overlay.full_frame:
+            self._want_full = True
+            self.overlay_worker.poke()
 
     def _update_mi(self) -> None:
         # The overlay goes first: on 2 cores an MI evaluation of many full-size scenes would
@@ -329,6 +366,7 @@ class App:
     def stop(self) -> None:
         self.cancel_run()
         self.wait_run(5.0)
+        self.overlay_settle.stop()
         for worker in (self.overlay_worker, self.mi_worker, self.compare_worker):
             worker.stop()
         self.server.stop()

@@ -98,3 +98,49 @@ class Ticker:
             self._tick()
         except Exception:  # a failed update must not end the updates
             log.exception("ticker failed")
+
+
+class Settle:
+    """Call ``job()`` once things have been quiet for ``quiet`` seconds after the last :meth:`poke`.
+
+    Used to send the full-size overlay once a drag or a burst of key presses has stopped
+    (the frames during it are display-sized previews).
+    """
+
+    def __init__(self, name: str, job: Callable[[], None], quiet: float = 0.3) -> None:
+        self._job, self._quiet = job, float(quiet)
+        self._last = 0.0
+        self._armed = False
+        self._stop = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._loop, name=f"l2e-{name}", daemon=True)
+        self._thread.start()
+
+    def poke(self) -> None:
+        with self._cond:
+            self._last = time.monotonic()
+            self._armed = True
+            self._cond.notify()
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(timeout=5.0)
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._armed and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                wait = self._last + self._quiet - time.monotonic()
+                if wait > 0:
+                    self._cond.wait(wait)
+                    continue
+                self._armed = False
+            try:
+                self._job()
+            except Exception:
+                log.exception("settle job failed")

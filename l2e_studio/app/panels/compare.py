@@ -7,7 +7,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..browser_js import hide_inputs, pointer_marker
 from ..context import Workbench
+from ..exact import parse_number
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
 from ..text import num
@@ -26,14 +28,26 @@ class ComparePanel:
         cam = app.camera
         with overlay.compare_tab:
             self.caption = gui.add_markdown(NO_RESULT)
+            gui.add_html(pointer_marker("Compare pointer", drag=True))
             self.image = gui.add_image(np.zeros((cam.height // 2, cam.width, 3), np.uint8), format="jpeg",
                                        jpeg_quality=85, visible=False)
             self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="side by side")
             self.amount = gui.add_slider("Swipe / blend", 0.0, 1.0, 0.01, 0.5,
                                          hint="Swipe: where the seed ends and the result begins; blend: share of the result")
+            self.pointer = gui.add_text("Compare pointer", "", hint="(set by clicks and drags on the image)")
+            gui.add_html(hide_inputs([self.pointer]))
+        self.pointer.on_update(self._on_pointer)
         self.mode.on_update(lambda _: app.compare_changed())
         self.amount.on_update(lambda _: app.compare_changed())
         self.frames = 0
+
+    def _on_pointer(self, event) -> None:
+        """Drag (or click) on the image: the swipe line or the blend follows the pointer's x."""
+        parts = str(self.pointer.value).split(",")
+        fx = parse_number(parts[0]) if parts else None
+        if event.client is None or fx is None or self.mode.value == "side by side":
+            return
+        self.amount.value = float(np.clip(round(fx, 3), 0.0, 1.0))  # runs the amount's callback
 
     def compose(self, snap: Snapshot, mode: str | None = None, scale: float = 0.5) -> np.ndarray | None:
         """The before/after image of the selected scene, or None without a result."""

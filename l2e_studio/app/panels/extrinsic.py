@@ -44,7 +44,7 @@ class ExtrinsicPanel:
         gui = app.server.gui
         self.reference = app.state.reference
         self.values = sliders_from_extrinsic(app.state.reference, self.reference)
-        gui.add_markdown(HELP)
+        self.readout = gui.add_markdown("MI: computing...")  # on top: visible while nudging at 1366x768
         self.step = gui.add_dropdown("Step", tuple(STEPS), initial_value="fine: 1 mm / 0.1°")
         self.history = gui.add_button_group("Edit", ("Undo", "Redo"),
                                             hint="Undo / redo extrinsic changes (Ctrl+Z, Ctrl+Shift+Z)")
@@ -67,7 +67,6 @@ class ExtrinsicPanel:
             self.nudges.append(b)
         gui.add_html(hide_slider_boxes([s._impl.uuid for s in self.sliders]) + KEY_HANDLING_HTML)
         self.note = gui.add_markdown("", visible=False)
-        self.readout = gui.add_markdown("MI: computing...")
         self.pose_text = gui.add_markdown("")
         self.reset = gui.add_button("Reset to file seed", icon=viser.Icon.ARROW_BACK_UP,
                                     hint=f"Back to the seed read from {app.scene_set.seed_source or 'the scene folder'}")
@@ -75,6 +74,7 @@ class ExtrinsicPanel:
                                           hint="camera.yaml, result file, config.json, 4x4 matrix ...")
         self.save = gui.add_button("Save seed", icon=viser.Icon.DEVICE_FLOPPY,
                                    hint="Write the current extrinsic as a seed file in the results folder")
+        gui.add_markdown(HELP)
         self.step.on_update(lambda _: self._apply_step())
         self.history.on_click(lambda event: app.undo() if self.history.value == "Undo" else app.redo())
         self.reset.on_click(lambda event: app.set_extrinsic(app.state.reset_extrinsic(), source="reset"))
@@ -146,12 +146,12 @@ class ExtrinsicPanel:
     def _on_save(self, event) -> None:
         ext = self.app.state.snapshot().extrinsic
         try:
-            path = save_seed(self.app.out_dir, ext)
+            path = save_seed(self.app.out_dir, ext, self.app.current_pairs())
         except OSError as exc:
             self.app.notify(event.client, "Seed not saved", f"{self.app.out_dir}: {exc}", color="red")
             return
         if event.client is not None:
-            event.client.send_file_download(path.name, seed_document(ext))
+            event.client.send_file_download(path.name, seed_document(ext, pairs=self.app.current_pairs()))
         self.app.notify(event.client, "Seed saved", str(path), color="green")
 
     # --- refresh from the state ------------------------------------------------------------

@@ -3,17 +3,46 @@ projected at the current extrinsic, and the display controls."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from ..context import Workbench
+from ..browser_js import hide_inputs, pointer_marker
 from ..display import MAP_MODES
-from ..overlay import COLOR_MODES, OverlayStyle, render_overlay
+from ..exact import parse_number
+from ..inspect import ZOOMS, Window, depth_range, edge_view, legend_html, zoom_window, zoomed
+from ..overlay import COLOR_MODES, OverlayStyle, project_scene, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
 
 JPEG_QUALITY = 80
+DISPLAY_WIDTH = 640  # px: about the overlay's width on the page at 1366x768 (previews are sent at this size)
+PREVIEW_JPEG_QUALITY = 50  # a moving preview: ~60 KB per update per tab; the frame at rest uses JPEG_QUALITY
 PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
+
+
+VIEWS = ("overlay", "edges")
+EDGE_LEGEND = ("<div style='font-size:0.75em;padding:0 0.5em'><span style='color:#00c8ff'>■</span> map edges · "
+               "<span style='color:#ff00c8'>■</span> depth edges of the projected points · "
+               "<span style='color:#999'>■</span> white: both (aligned)</div>")
+
+
+def _pair(text: str) -> tuple[float, float] | None:
+    """``"x, y"`` -> (x, y), or None."""
+    parts = str(text).replace(";", ",").split(",")
+    if len(parts) < 2:
+        return None
+    a, b = parse_number(parts[0]), parse_number(parts[1])
+    return None if a is None or b is None else (a, b)
+
+
+def display_sized(image: np.ndarray, width: int = DISPLAY_WIDTH) -> np.ndarray:
+    """``image`` shrunk to ``width`` pixels wide (area averaging); unchanged when not wider."""
+    h, w = image.shape[:2]
+    if w <= width:
+        return image
+    return cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
 
 
 class OverlayPanel:
@@ -25,14 +54,26 @@ class OverlayPanel:
         cam = app.camera
         self.panel = gui.add_panel()
         self.frames = 0
+        self.full_frame = True  # whether the last frame sent was full size
         with self.panel.add_tab("Overlay"):
             # Stretch the overlay images to the panel's width (viser shows images at most at
             # their own size; small maps would otherwise stay small).
             gui.add_html("<style>img[src^='blob:'] { width: 100% !important; }</style>")
             self.caption = gui.add_markdown("Loading...")
+            gui.add_html(pointer_marker("Overlay pointer"))
             self.image = gui.add_image(
                 np.zeros((cam.height, cam.width, 3), np.uint8), format="jpeg", jpeg_quality=JPEG_QUALITY
             )
+            self.legend = gui.add_html(legend_html("intensity"))
+            self.zoom = gui.add_dropdown("Zoom", tuple(ZOOMS), initial_value="fit",
+                                         hint="Click the image to zoom there (2x) or to move the centre; "
+                                              "1:1 shows map pixels at screen pixels")
+            self.centre_in = gui.add_text("Zoom centre (px)", f"{cam.width / 2:g}, {cam.height / 2:g}",
+                                          hint="x, y in map pixels; or click the image")
+            self.view = gui.add_dropdown("View", VIEWS, initial_value="overlay",
+                                         hint="edges: map edges (cyan) against the points' depth edges (magenta); "
+                                              "white where they agree")
+            self.pointer = gui.add_text("Overlay pointer", "", hint="(set by clicks on the image)")
             with gui.add_folder("Display"):
                 self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value="intensity",
                                                  hint="Colour the lidar points by their intensity or their depth")
@@ -44,9 +85,15 @@ class OverlayPanel:
                     "Map", MAP_MODES, initial_value="raw",
                     hint="raw: the accumulated map as recorded; smoothed: clipped and blurred as the MI sees it",
                 )
+            gui.add_html(hide_inputs([self.pointer]))
         self.compare_tab = self.panel.add_tab("Before / after")
-        for handle in (self.color_by, self.point_size, self.opacity, self.contrast, self.map_mode):
+        for handle in (self.color_by, self.point_size, self.opacity, self.contrast, self.map_mode, self.zoom,
+                       self.view):
             handle.on_update(lambda _: app.display_changed())
+        self.centre = (cam.width / 2.0, cam.height / 2.0)
+        self.window: Window | None = None  # the part of the map the last frame showed
+        self.centre_in.on_update(self._on_centre_typed)
+        self.pointer.on_update(self._on_pointer)
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
 
@@ -69,9 +116,62 @@ class OverlayPanel:
         colors = disp.colors() if style.color_by == "intensity" else None
         return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
 
-    def render(self, snap: Snapshot) -> None:
-        self.image.image = self.draw(snap.selected, snap.shown_extrinsic)
+    def render(self, snap: Snapshot, full: bool = True) -> None:
+        """Draw the overlay; ``full=False`` sends a display-sized preview (while controls move).
+
+        Zoomed views are always display-sized (a window of the map at native resolution or
+        magnified), so they need no preview."""
+        style = self.style()
+        index, extrinsic = snap.selected, snap.shown_extrinsic
+        disp = self.app.displays[index]
+        projection = None
+        if self.view.value == "edges" or style.color_by == "depth":
+            projection = project_scene(disp.scene.points, extrinsic, self.app.camera)
+        if self.view.value == "edges":
+            assert projection is not None
+            normalised = disp.normalised("smoothed", self.app.readout.sigma)  # edges of the map the MI sees
+            image = edge_view(normalised, projection.uv, projection.depth)
+        else:
+            image = self.draw(index, extrinsic, style)
+        zoom = self.zoom.value
+        window = zoom_window(image.shape, zoom, self.centre, DISPLAY_WIDTH)
+        if zoom != "fit":
+            image, full = zoomed(image, window, zoom), True
+        # viser 1.1 has no public per-frame quality; its handle reads this attribute when encoding
+        self.image._jpeg_quality = JPEG_QUALITY if full else PREVIEW_JPEG_QUALITY
+        self.image.image = image if full else display_sized(image)
+        self.window, self.full_frame = window, full
         self.frames += 1
+        depth = depth_range(projection.depth) if projection is not None and style.color_by == "depth" else None
+        legend = legend_html(style.color_by, depth, disp.scene.map_kind)
+        if self.view.value == "edges":
+            legend = EDGE_LEGEND
+        if legend != self.legend.content:
+            self.legend.content = legend
+
+    # --- zoom and pan ------------------------------------------------------------------------
+    def _on_pointer(self, event) -> None:
+        """A click on the image (fractions of its width and height): centre there; zoom in from fit."""
+        xy = _pair(self.pointer.value)
+        if event.client is None or xy is None or self.window is None:
+            return
+        x, y = self.window.to_map(*xy)
+        if self.app.image_clicked(x, y):  # a pair being picked takes the click
+            return
+        self.centre = (x, y)
+        self.centre_in.value = f"{self.centre[0]:.0f}, {self.centre[1]:.0f}"
+        if self.zoom.value == "fit":
+            self.zoom.value = "2x"  # runs the display callback
+        else:
+            self.app.display_changed()
+
+    def _on_centre_typed(self, event) -> None:
+        xy = _pair(self.centre_in.value)
+        if event.client is None or xy is None:
+            return
+        cam = self.app.camera
+        self.centre = (float(np.clip(xy[0], 0, cam.width - 1)), float(np.clip(xy[1], 0, cam.height - 1)))
+        self.app.display_changed()
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]

@@ -3,9 +3,29 @@ see every scene's MI at the current extrinsic and the scenes that failed to load
 
 from __future__ import annotations
 
+from typing import Sequence
+
+import numpy as np
+
+from ..browser_js import KEY_HANDLING_HTML, hide_inputs
 from ..context import Workbench
 from ..readout import MiReading
 from ..text import num
+
+
+SORT_KEYS = ("name", "points", "MI now (high first)", "MI now (low first)")
+TABLE_MARK = "use"  # the first header cell: how the page script recognises this table's rows
+
+
+def scene_order(key: str, names: Sequence[str], points: Sequence[int], mi: Sequence[float] | None) -> list[int]:
+    """Scene indices in the table's order (MI sorts put missing values last)."""
+    idx = list(range(len(names)))
+    if key == "points":
+        return sorted(idx, key=lambda i: (-points[i], names[i]))
+    if key.startswith("MI") and mi is not None:
+        sign = -1.0 if "high" in key else 1.0
+        return sorted(idx, key=lambda i: (not np.isfinite(mi[i]), sign * float(np.nan_to_num(mi[i])), names[i]))
+    return sorted(idx, key=lambda i: names[i])
 
 
 class ScenesPanel:
@@ -20,6 +40,10 @@ class ScenesPanel:
         self.include = gui.add_checkbox("Use in optimisation", True,
                                         hint="Excluded scenes are held out: still scored, not optimised over")
         self.all_on = gui.add_button_group("Include", ("all", "none"))
+        self.sort = gui.add_dropdown("Sort by", SORT_KEYS, initial_value="name",
+                                     hint="Order of the table; click a row to show that scene, its ✓ to include it")
+        self.pointer = gui.add_text("Scene pointer", "", hint="(set by clicks on the table)")
+        gui.add_html(hide_inputs([self.pointer]) + KEY_HANDLING_HTML)
         self.table = gui.add_markdown(self._table(None))
         self.failures = gui.add_markdown(self._failures(), visible=bool(ss.failures or ss.unpaired))
 
@@ -41,6 +65,25 @@ class ScenesPanel:
             app.state.set_all_included(self.all_on.value == "all")
             app.inclusion_changed()
 
+        self.sort.on_update(lambda _: setattr(self.table, "content", self._table(self.app.reading)))
+        self.pointer.on_update(self._on_row_click)
+
+    def _on_row_click(self, event) -> None:
+        """A click on a table row: ``select:<name>`` shows that scene, ``toggle:<name>`` flips its inclusion."""
+        if event.client is None:
+            return
+        action, _, rest = str(self.pointer.value).partition(":")
+        name = rest.rsplit(",", 1)[0].strip()
+        names = self.app.state.scene_names
+        if name not in names:
+            return
+        index = names.index(name)
+        if action == "toggle":
+            self.app.state.set_included(index, not self.app.state.snapshot().included[index])
+            self.app.inclusion_changed()
+        elif action == "select":
+            self.app.select_scene(index)
+
     def show_selection(self) -> None:
         snap = self.app.state.snapshot()
         self.dropdown.value = self.app.state.scene_names[snap.selected]
@@ -54,8 +97,11 @@ class ScenesPanel:
         snap = self.app.state.snapshot()
         n_in = sum(snap.included)
         rows = [f"Optimising over **{n_in}** of {len(snap.included)} scenes.", "",
-                "| | scene | points | MI now |", "|:-:|:--|--:|--:|"]
-        for i, name in enumerate(self.app.state.scene_names):
+                f"| {TABLE_MARK} | scene | points | MI now |", "|:-:|:--|--:|--:|"]
+        for i in scene_order(self.sort.value, self.app.state.scene_names,
+                             [s.points.shape[0] for s in self.app.scene_set.scenes],
+                             None if reading is None else reading.per_scene):
+            name = self.app.state.scene_names[i]
             mark = "✓" if snap.included[i] else "–"
             mi = "" if reading is None else num(reading.per_scene[i])
             label = f"**{name}**" if i == snap.selected else name

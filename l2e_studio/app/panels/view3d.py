@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import viser
+from scipy.spatial.transform import Rotation
 
 from ..context import Workbench
 from ...geometry import Extrinsic
@@ -25,6 +26,22 @@ def extrinsic_from_pose(wxyz: np.ndarray, position: np.ndarray) -> Extrinsic:
     """``T_cam_lidar`` from the camera's pose in the lidar frame."""
     w, x, y, z = np.asarray(wxyz, dtype=np.float64)
     return Extrinsic.from_quaternion([x, y, z, w], position).inverse()
+
+
+FINE_FACTOR = 0.1
+
+
+def scaled_gizmo_step(current: Extrinsic, before: tuple, after: tuple, factor: float) -> Extrinsic:
+    """``current`` moved by ``factor`` times the gizmo's step from pose ``before`` to ``after``
+    ((wxyz, position) of the camera in the lidar frame; the step is taken in the lidar frame)."""
+    (w0, p0), (w1, p1) = before, after
+    r0 = Rotation.from_quat([w0[1], w0[2], w0[3], w0[0]])
+    r1 = Rotation.from_quat([w1[1], w1[2], w1[3], w1[0]])
+    step = Rotation.from_rotvec(factor * (r1 * r0.inv()).as_rotvec())
+    cw, cp = camera_pose(current)
+    rc = Rotation.from_quat([cw[1], cw[2], cw[3], cw[0]])
+    x, y, z, w = (step * rc).as_quat()
+    return extrinsic_from_pose(np.array([w, x, y, z]), cp + factor * (np.asarray(p1) - np.asarray(p0)))
 
 
 class View3D:
@@ -50,6 +67,9 @@ class View3D:
         self.reset_view = app.server.gui.add_button(
             "Reset 3D view", icon=viser.Icon.HOME, hint="Put the 3D view back behind the camera, looking along it")
         self.reset_view.on_click(lambda event: self.reset_viewpoint())
+        self.fine = app.server.gui.add_checkbox(
+            "Fine gizmo (1/10)", False, hint="A gizmo drag moves the camera a tenth as far (it catches up when you let go)")
+        self._last_pose = (np.asarray(wxyz, float), np.asarray(pos, float))  # the gizmo pose last seen
 
     def reset_viewpoint(self) -> None:
         """Every tab's 3D viewpoint back to the start-up one."""
@@ -73,13 +93,20 @@ class View3D:
         ic.up = (0.0, 0.0, 1.0)
 
     def _on_gizmo(self, event) -> None:
-        ext = extrinsic_from_pose(self.gizmo.wxyz, self.gizmo.position)
-        self.app.set_extrinsic(ext, source="gizmo")
+        wxyz, pos = np.asarray(self.gizmo.wxyz, float), np.asarray(self.gizmo.position, float)
+        previous, self._last_pose = self._last_pose, (wxyz, pos)
+        if not self.fine.value:
+            self.app.set_extrinsic(extrinsic_from_pose(wxyz, pos), source="gizmo")
+            return
+        current = self.app.state.snapshot().extrinsic
+        ext = scaled_gizmo_step(current, previous, (wxyz, pos), FINE_FACTOR)
+        self.app.set_extrinsic(ext, source="gizmo-fine")  # the gizmo is re-posed when the drag rests
 
     def show_pose(self, extrinsic: Extrinsic) -> None:
         wxyz, pos = camera_pose(extrinsic)
         self.gizmo.wxyz = wxyz
         self.gizmo.position = pos
+        self._last_pose = (np.asarray(wxyz, float), np.asarray(pos, float))
 
     def show_scene(self, index: int) -> None:
         if index == self.shown_scene:
