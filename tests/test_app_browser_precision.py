@@ -307,7 +307,7 @@ def test_scene_rows_select_and_toggle_and_the_table_sorts(page, app):
     wait_for(lambda: app.reading is not None, what="MI")
     sort_id = page.locator("label", has_text="Sort by").first.get_attribute("for")
     page.locator(f"[id='{sort_id}']").click()
-    page.get_by_role("option", name="MI now (low first)").click()
+    page.get_by_role("option", name="score now (low first)").click()
     expected = [app.state.scene_names[i] for i in np.argsort(app.reading.per_scene)]
 
     def shown() -> list[str]:

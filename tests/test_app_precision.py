@@ -214,9 +214,9 @@ def test_scene_order_sorts_by_name_points_and_mi():
     names, points, mi = ["b", "a", "c"], [10, 30, 20], np.array([0.2, np.nan, 0.5])
     assert scene_order("name", names, points, mi) == [1, 0, 2]
     assert scene_order("points", names, points, mi) == [1, 2, 0]
-    assert scene_order("MI now (high first)", names, points, mi) == [2, 0, 1]  # NaN last
-    assert scene_order("MI now (low first)", names, points, mi) == [0, 2, 1]
-    assert scene_order("MI now (low first)", names, points, None) == [1, 0, 2]
+    assert scene_order("score now (high first)", names, points, mi) == [2, 0, 1]  # NaN last
+    assert scene_order("score now (low first)", names, points, mi) == [0, 2, 1]
+    assert scene_order("score now (low first)", names, points, None) == [1, 0, 2]
 
 
 def test_pnp_from_four_or_more_pairs_recovers_the_extrinsic():

@@ -209,3 +209,26 @@ def test_fine_gizmo_moves_a_tenth_and_catches_up_at_rest(app):
     x, y, z, w = turned.as_quat()
     got = scaled_gizmo_step(start, (w0, p0), (np.array([w, x, y, z]), p0), 0.1)
     assert start.error_to(got)[0] == pytest.approx(np.degrees(0.02), rel=1e-6)  # (deg, m): 0.2 rad / 10
+
+
+def test_the_verdict_is_shown_beside_the_result_and_saved(app):
+    import yaml
+
+    app.start_run(CalibrationSettings())
+    assert app.wait_run(180)
+    snap = app.state.snapshot()
+    v = snap.verdict
+    assert v is not None and v.status in ("trusted", "trusted-rotation", "not-trusted")
+    assert f"Verdict: {v.summary()}" in app.results.summary.content
+    for reason in v.reasons:
+        assert reason in app.results.summary.content
+    expected = {"trusted": "Accept as seed", "trusted-rotation": "Accept rotation (seed's translation kept)",
+                "not-trusted": "Accept anyway (not trusted)"}[v.status]
+    assert app.results.accept.label == expected
+    path, _ = app.save_result()
+    doc = yaml.safe_load(path.read_text())
+    assert doc["verdict"]["status"] == v.status and doc["verdict"]["summary"] == v.summary()
+    app.accept_result()
+    accepted = app.state.snapshot().extrinsic
+    wanted = v.extrinsic if v.trusted else snap.result.extrinsic
+    assert np.allclose(accepted.params, wanted.params)

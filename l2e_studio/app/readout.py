@@ -16,6 +16,7 @@ import numpy as np
 from ..camera import CameraModel
 from ..geometry import Extrinsic
 from ..scoring import objective_for
+from .text import score_label
 from ..objective import SceneStack
 from ..scenes import Scene
 
@@ -47,6 +48,11 @@ class MiReadout:
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
             objective=objective_for(sc.map_kind for sc in scenes),
         )
+
+    @property
+    def label(self) -> str:
+        """The score's on-screen name ("MI", "edge score")."""
+        return score_label(self._stack.objective_name)
 
     @property
     def sigma(self) -> float:

@@ -22,6 +22,7 @@ import viser
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
 from ..geometry import Extrinsic
 from ..scenes import SceneSet
+from ..verdict import Verdict, judge
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
@@ -36,7 +37,7 @@ from .panels.scenes import ScenesPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .state import SessionState
-from .text import num
+from .text import num, score_label
 from .workers import LatestWorker, Settle, Ticker
 
 log = logging.getLogger(__name__)
@@ -246,7 +247,7 @@ class App:
                 # the readout's stack already holds every scene: no second load or stacking
                 stack = self.readout.stack.subset(np.asarray(snap.included, dtype=bool))
                 result = calibrate(stack, None, snap.extrinsic, settings, on_progress, cancel)
-                self.state.finish_run(run_id, result)
+                self.state.finish_run(run_id, result, verdict=self._judge(stack, result, settings, cancel))
             except Exception as exc:  # shown to the user; the app keeps running
                 log.exception("optimisation failed")
                 self.state.finish_run(run_id, error=f"{type(exc).__name__}: {exc}")
@@ -257,6 +258,18 @@ class App:
         self._run_thread = threading.Thread(target=work, name="l2e-calibrate", daemon=True)
         self._run_thread.start()
         return run_id
+
+    def _judge(self, stack, result: CalibrationResult, settings: CalibrationSettings, cancel) -> Verdict | None:
+        """The verdict on a finished run (none for a cancelled one: it is not an answer)."""
+        if result.cancelled:
+            return None
+        self.optimise.show_status("Judging the result: halves, a second start, a second score...")
+        try:
+            verdict = judge(stack, result, settings, cancel=cancel)
+        except Exception:  # the result stands without a verdict rather than being lost
+            log.exception("judging the result failed")
+            return None
+        return None if cancel.is_set() else verdict
 
     def cancel_run(self) -> bool:
         """Ask a running optimisation to stop (it returns its best point so far)."""
@@ -300,11 +313,14 @@ class App:
         elif snap.result is not None:
             r: CalibrationResult = snap.result
             verb = "cancelled" if r.cancelled else "finished"
+            v = snap.verdict
             self.notify_all(
                 f"Optimisation {verb}",
-                f"MI {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} evaluations "
-                f"({r.seconds:.1f} s). See the Result tab and Before / after.",
-                color="yellow" if r.cancelled else "green",
+                f"{score_label(r.objective)} {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} "
+                f"evaluations ({r.seconds:.1f} s)." + (f" Verdict: {v.summary()}." if v is not None else "")
+                + " See the Result tab and Before / after.",
+                color="yellow" if r.cancelled or (v is not None and v.status == "trusted-rotation")
+                else "red" if v is not None and not v.trusted else "green",
             )
 
     # --- results ----------------------------------------------------------------------------------
@@ -328,7 +344,7 @@ class App:
             raise RuntimeError("there is no result to save")
         image = self.compare.compose(snap, mode="side by side", scale=1.0)
         held = self._score_held_out(snap.result)  # the inclusion may have changed since the run
-        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held)
+        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held, snap.verdict)
 
     def set_out_dir(self, text: str) -> str:
         """Use the folder ``text`` for results and seeds from now on; returns a note ("" if none).

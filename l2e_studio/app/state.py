@@ -54,6 +54,7 @@ class Snapshot:
     result: Any
     follow_best: bool
     showing_result: bool = False
+    verdict: Any = None  # the verdict.Verdict on ``result`` (None: cancelled, failed, or not judged)
 
     @property
     def shown_extrinsic(self) -> Extrinsic:
@@ -77,6 +78,7 @@ class SessionState:
     included: list[bool] = field(default_factory=list)
     run: RunState = field(default_factory=RunState)
     result: Any = None  # a calibrate.CalibrationResult once a run finishes
+    verdict: Any = None  # its verdict.Verdict, when it was judged
     follow_best: bool = True
     showing_result: bool = False  # the overlay stays on a run's result until the next change
     version: int = 0
@@ -107,6 +109,7 @@ class SessionState:
                 self.result,
                 self.follow_best,
                 self.showing_result,
+                self.verdict,
             )
 
     # --- the extrinsic ---------------------------------------------------------------------
@@ -205,8 +208,9 @@ class SessionState:
             self._bump()
             return True
 
-    def finish_run(self, run_id: int, result: Any = None, error: str = "") -> bool:
-        """Close the run with its result (``result.cancelled`` marks a cancel) or an error."""
+    def finish_run(self, run_id: int, result: Any = None, error: str = "", verdict: Any = None) -> bool:
+        """Close the run with its result (``result.cancelled`` marks a cancel) and its verdict,
+        or an error."""
         with self._lock:
             if run_id != self.run.run_id:
                 return False
@@ -221,22 +225,27 @@ class SessionState:
                                fraction=1.0 if status == "done" else self.run.fraction)
             if result is not None:
                 self.result = result
+                self.verdict = verdict
                 self.showing_result = self.follow_best
             self._bump()
             return True
 
     # --- the result ---------------------------------------------------------------------------
     def accept_result(self) -> Extrinsic:
-        """The result becomes the current extrinsic (the seed of the next run)."""
+        """The result becomes the current extrinsic (the seed of the next run): what a trusting
+        verdict hands back (for ``trusted-rotation``, the rotation with the seed's translation),
+        else the optimiser's answer as it is (accepting an untrusted result is the user's call)."""
         with self._lock:
             if self.result is None:
                 raise RuntimeError("there is no result to accept")
-            self.set_extrinsic(self.result.extrinsic, "accept")
-            return self.result.extrinsic
+            chosen = self.verdict.extrinsic if self.verdict is not None and self.verdict.trusted else self.result.extrinsic
+            self.set_extrinsic(chosen, "accept")
+            return chosen
 
     def discard_result(self) -> None:
         with self._lock:
             self.result = None
+            self.verdict = None
             self.showing_result = False
             self._bump()
 

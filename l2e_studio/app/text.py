@@ -18,3 +18,12 @@ def num(value: float | None, digits: int = 4, signed: bool = False) -> str:
     if not math.isfinite(v):
         return MISSING
     return f"{v:+.{digits}f}" if signed else f"{v:.{digits}f}"
+
+
+#: How each objective (``scoring.OBJECTIVES``) is named on screen.
+SCORE_LABELS = {"mi": "MI", "edges": "edge score"}
+
+
+def score_label(objective: str) -> str:
+    """The on-screen name of an objective's score."""
+    return SCORE_LABELS.get(objective, objective)

@@ -12,7 +12,7 @@ from ..context import Workbench
 from ..exact import parse_number
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
-from ..text import num
+from ..text import num, score_label
 
 if TYPE_CHECKING:
     from .overlay_view import OverlayPanel
@@ -70,12 +70,13 @@ class ComparePanel:
         name = self.app.state.scene_names[snap.selected]
         try:
             k = list(r.scene_names).index(name)
-            scores = f"MI of this scene {num(r.score_seed_per_scene[k])} (seed) -> {num(r.score_result_per_scene[k])} (result)"
+            scores = (f"{score_label(r.objective)} of this scene {num(r.score_seed_per_scene[k])} (seed) -> "
+                      f"{num(r.score_result_per_scene[k])} (result)")
         except ValueError:  # held out of the optimisation: score it with the readout's stack
             everything = [True] * len(self.app.state.scene_names)
             score_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
             mi_res = self.app.readout.read(r.extrinsic, everything).per_scene[snap.selected]
-            scores = f"held out of the optimisation; MI {num(score_seed)} (seed) -> {num(mi_res)} (result)"
+            scores = f"held out of the optimisation; {score_label(r.objective)} {num(score_seed)} (seed) -> {num(mi_res)} (result)"
         self.caption.content = f"**{name}**: {scores}"
         self.image.image = img
         self.image.visible = True

@@ -185,7 +185,7 @@ class ExtrinsicPanel:
         n_in = sum(snap.included)
         delta = reading.total - reference_mi
         self.readout.content = (
-            f"**MI · {name}: {num(reading.per_scene[snap.selected])}**  \n"
-            f"**MI · {n_in} included scenes: {num(reading.total)}** "
+            f"**{self.app.readout.label} · {name}: {num(reading.per_scene[snap.selected])}**  \n"
+            f"**{self.app.readout.label} · {n_in} included scenes: {num(reading.total)}** "
             f"({num(delta, signed=True)} vs file seed)"
         )

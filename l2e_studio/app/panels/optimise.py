@@ -67,7 +67,7 @@ class OptimisePanel:
                 viser.uplot.Series(label="MI", stroke="#1c7ed6", width=1),
                 viser.uplot.Series(label="best", stroke="#e8590c", width=2),
             ),
-            title="MI vs evaluation",
+            title=f"{app.readout.label} vs evaluation",
             scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True)},
             aspect=1.6,
             visible=False,
@@ -136,6 +136,10 @@ class OptimisePanel:
             self.cancel.disabled = True
             self.status.content = "**Cancelling...** the optimiser stops at its next evaluation and keeps its best point"
 
+    def show_status(self, text: str) -> None:
+        """A status line of the run's own (e.g. while its result is being judged)."""
+        self.status.content = text
+
     def show_running(self, running: bool) -> None:
         self.cancel.disabled = not running
         for handle in (self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only, self.coarse):
@@ -156,7 +160,7 @@ class OptimisePanel:
         else:
             head = STATUS_WORDS[run.status]
         text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n"
-                f"objective MI {num(run.mi)} · best {num(run.best_mi)}")
+                f"objective {self.app.readout.label} {num(run.mi)} · best {num(run.best_mi)}")
         if run.error:
             text += f"  \n{run.error}"
         self.status.content = text

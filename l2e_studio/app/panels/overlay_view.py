@@ -175,7 +175,7 @@ class OverlayPanel:
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]
-        mi = "" if reading is None else f" · MI {num(reading.per_scene[snap.selected])}"
+        mi = "" if reading is None else f" · {self.app.readout.label} {num(reading.per_scene[snap.selected])}"
         if snap.showing_result and snap.result is not None and not snap.run.active:
             mi += " at your extrinsic"  # the reading is of the current extrinsic, not of the result shown
         note = ""

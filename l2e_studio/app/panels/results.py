@@ -1,5 +1,6 @@
-"""The result of the last run: MI at seed and at result (pooled and per scene), accept it as
-the new seed or discard it, and save the result file with a before/after image."""
+"""The result of the last run: its verdict in words, the score at seed and at result (pooled and
+per scene), accept it as the new seed or discard it, and save the result file with a
+before/after image."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from ..context import Workbench
 from ...errors import InputError
 from ..heldout import HeldOutScore
 from ..pose import describe
-from ..text import num
+from ..text import num, score_label
 from ..state import Snapshot
 
 NO_RESULT = "No result yet."
@@ -77,15 +78,19 @@ class ResultPanel:
             self.table.content = ""
             return
         cancelled = bool(r.cancelled)
-        # A cancelled run's point is not a converged result: no green "go" styling for it.
-        self.accept.color = "yellow" if cancelled else "green"
-        self.accept.label = "Accept best-so-far as seed" if cancelled else "Accept as seed"
+        v = snap.verdict
+        # Only a result the verdict trusts gets the green "go": a cancelled run's point is not a
+        # converged result, and an untrusted one is accepted only on the user's own judgement.
+        self.accept.color, self.accept.label = accept_style(cancelled, v)
         err_deg, err_m = r.seed.error_to(r.extrinsic)
         state = ("■ **Run cancelled**: the best point so far, not a converged result" if cancelled
                  else "✓ **Run finished**")
+        label = score_label(r.objective)
         self.summary.content = (
             f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
-            f"**MI {num(r.score_seed)} → {num(r.score_result)}** ({num(r.score_result - r.score_seed, signed=True)}) over "
+            + (verdict_text(v) + "  \n" if v is not None else "")
+            + f"**{label} {num(r.score_seed)} → {num(r.score_result)}** "
+            f"({num(r.score_result - r.score_seed, signed=True)}) over "
             f"{len(r.scene_names)} scenes" + (f", {len(held_out)} held out" if held_out else "") + "  \n"
             f"moved {err_deg:.3f}° / {100 * err_m:.2f} cm from its seed  \n"
             f"{describe(r.extrinsic, self.app.state.reference)}"
@@ -93,14 +98,39 @@ class ResultPanel:
         self.table.content = result_table(r, held_out)
 
 
+VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "✗"}
+
+
+def verdict_text(verdict) -> str:
+    """The verdict in words, with why (markdown)."""
+    head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
+    if not verdict.reasons:
+        return head
+    return head + "".join(f"  \n· {r}" for r in verdict.reasons)
+
+
+def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
+    """(colour, label) of the Accept button for a run's result and its verdict."""
+    if cancelled:
+        return "yellow", "Accept best-so-far as seed"
+    if verdict is None:
+        return "yellow", "Accept as seed (not judged)"
+    if verdict.status == "trusted":
+        return "green", "Accept as seed"
+    if verdict.status == "trusted-rotation":
+        return "green", "Accept rotation (seed's translation kept)"
+    return "red", "Accept anyway (not trusted)"
+
+
 def result_table(result, held_out: Sequence[HeldOutScore] = ()) -> str:
     """Markdown: one row per optimised scene, then the held-out ones marked as such."""
-    rows = ["| scene | MI seed | MI result | Δ |", "|:--|--:|--:|--:|"]
+    label = score_label(result.objective)
+    rows = [f"| scene | {label} seed | {label} result | Δ |", "|:--|--:|--:|--:|"]
     for name, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene):
         rows.append(f"| {name} | {num(a)} | {num(b)} | {num(b - a, signed=True)} |")
     for h in held_out:
         rows.append(f"| {h.name} (held out) | {num(h.score_seed)} | {num(h.score_result)} | "
                     f"{num(h.score_result - h.score_seed, signed=True)} |")
     if held_out:
-        rows += ["", "Held-out scenes were not optimised over: their MI checks the result on unseen data."]
+        rows += ["", f"Held-out scenes were not optimised over: their {label} checks the result on unseen data."]
     return "\n".join(rows)

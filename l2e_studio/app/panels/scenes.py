@@ -1,5 +1,5 @@
 """The scene list: pick the scene shown, include or exclude scenes from the optimisation,
-see every scene's MI at the current extrinsic and the scenes that failed to load."""
+see every scene's score at the current extrinsic and the scenes that failed to load."""
 
 from __future__ import annotations
 
@@ -13,16 +13,16 @@ from ..readout import MiReading
 from ..text import num
 
 
-SORT_KEYS = ("name", "points", "MI now (high first)", "MI now (low first)")
+SORT_KEYS = ("name", "points", "score now (high first)", "score now (low first)")
 TABLE_MARK = "use"  # the first header cell: how the page script recognises this table's rows
 
 
 def scene_order(key: str, names: Sequence[str], points: Sequence[int], mi: Sequence[float] | None) -> list[int]:
-    """Scene indices in the table's order (MI sorts put missing values last)."""
+    """Scene indices in the table's order (score sorts put missing values last)."""
     idx = list(range(len(names)))
     if key == "points":
         return sorted(idx, key=lambda i: (-points[i], names[i]))
-    if key.startswith("MI") and mi is not None:
+    if key.startswith("score") and mi is not None:
         sign = -1.0 if "high" in key else 1.0
         return sorted(idx, key=lambda i: (not np.isfinite(mi[i]), sign * float(np.nan_to_num(mi[i])), names[i]))
     return sorted(idx, key=lambda i: names[i])
@@ -97,7 +97,7 @@ class ScenesPanel:
         snap = self.app.state.snapshot()
         n_in = sum(snap.included)
         rows = [f"Optimising over **{n_in}** of {len(snap.included)} scenes.", "",
-                f"| {TABLE_MARK} | scene | points | MI now |", "|:-:|:--|--:|--:|"]
+                f"| {TABLE_MARK} | scene | points | score now |", "|:-:|:--|--:|--:|"]
         for i in scene_order(self.sort.value, self.app.state.scene_names,
                              [s.points.shape[0] for s in self.app.scene_set.scenes],
                              None if reading is None else reading.per_scene):
