@@ -13,10 +13,12 @@ from the truth. So the result is judged by what the optimiser never saw or never
   back to the result (a side peak reached from the seed seldom attracts both sides).
 * **the result's own score** must beat the seed's.
 
-All agree: ``trusted``. The halves agree on rotation but not on translation (one or two street
-scans seldom pin the translation): ``trusted-rotation``, the seed's translation is kept and the
-rotation re-fitted to it. Otherwise ``not-trusted``: the seed is handed back (the default) or
-the result is kept and marked, as the caller chooses; each failed check gives one line of why.
+All agree: ``trusted``. Only the translation checks fail (one or two street scans seldom pin the
+translation): ``trusted-rotation``, the checked rotation with the seed's translation, if the scenes
+and both halves prefer that to the seed; when the rotation's checks failed too, a rotation fitted
+to the seed's translation gets a second chance on the same evidence. Otherwise ``not-trusted``:
+the seed is handed back (the default) or the result is kept and marked, as the caller chooses;
+each failed check gives one line of why.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -60,6 +63,10 @@ class Verdict:
     reasons: tuple[str, ...]  # one line per failed check (empty when trusted)
     checks: tuple[Check, ...]
     seconds: float
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {', '.join(STATUSES)}")
 
     @property
     def trusted(self) -> bool:
@@ -112,15 +119,18 @@ def mirrored_start(seed: Extrinsic, result: Extrinsic) -> Extrinsic:
     return result.perturbed(-dt, -dw)
 
 
-def second_score(stack: SceneStack, ext: Extrinsic) -> tuple[str, float]:
-    """The independent score: edge agreement for camera images, the paper's MI for event maps."""
+def second_score(stack: SceneStack) -> tuple[str, Callable[[Extrinsic], float]]:
+    """The independent score (its name, and the score as a function of the extrinsic): edge
+    agreement for camera images, the paper's MI on the raw maps for event maps."""
     if all(k == "events" for k in stack.map_kinds):
-        return "paper MI on the raw maps", stack.with_sigma(0.0).mi(ext, per_scene=False)[0]
-    return "edge points on Canny edges", edge_agreement(stack, ext)
+        raw = stack.with_sigma(0.0)
+        return "paper MI on the raw maps", lambda ext: raw.mi(ext, per_scene=False)[0]
+    return "edge points on Canny edges", edge_agreement(stack)
 
 
-def edge_agreement(stack: SceneStack, ext: Extrinsic) -> float:
-    """Weighted share of lidar edge points within ``EDGE_RADIUS_PX`` of a Canny edge of their map."""
+def edge_agreement(stack: SceneStack) -> Callable[[Extrinsic], float]:
+    """The weighted share of lidar edge points within ``EDGE_RADIUS_PX`` of a Canny edge of
+    their map, as a function of the extrinsic (edges and distance maps computed once)."""
     weights = stack.weights
     if weights is None:
         weights = np.zeros(stack.n_points, dtype=np.float32)
@@ -129,16 +139,20 @@ def edge_agreement(stack: SceneStack, ext: Extrinsic) -> float:
             weights[m] = lidar_edge_weights(stack.points[:, m].T, stack.l_bins[m].astype(np.float32))
     cam = stack.full_camera or stack.camera
     full = replace(stack, camera=cam)
-    uv, inside = full.project(ext)
     radius = EDGE_RADIUS_PX * cam.width / 1280.0
-    near = np.zeros(stack.n_points, dtype=bool)
-    for s, raw in enumerate(stack.raw_maps):
-        m = inside & (stack.scene_of == s)
-        dist = canny_distance(raw)
-        px = np.rint(uv[m]).astype(np.int64)
-        near[m] = dist[px[:, 1], px[:, 0]] <= radius
+    distances = [canny_distance(raw) for raw in stack.raw_maps]
     total = float(weights.sum())
-    return float(weights[near].sum() / total) if total > 0 else 0.0
+
+    def share(ext: Extrinsic) -> float:
+        uv, inside = full.project(ext)
+        near = np.zeros(stack.n_points, dtype=bool)
+        for s, dist in enumerate(distances):
+            m = inside & (stack.scene_of == s)
+            px = np.rint(uv[m]).astype(np.int64)
+            near[m] = dist[px[:, 1], px[:, 0]] <= radius
+        return float(weights[near].sum() / total) if total > 0 else 0.0
+
+    return share
 
 
 def judge(
@@ -154,7 +168,8 @@ def judge(
     t0 = time.perf_counter()
     seed, res = result.seed, result.extrinsic
     final = stack.with_sigma(settings.sigma)
-    checks = evidence(final, seed, res, settings, cancel)
+    second = second_score(final)
+    checks = evidence(final, seed, res, settings, second, cancel)
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
     if not failed:
@@ -175,7 +190,7 @@ def judge(
                           replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
                           cancel=cancel).extrinsic
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks = evidence(final, seed, refit, rotation, cancel)
+        rot_checks = evidence(final, seed, refit, rotation, second, cancel)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return Verdict("trusted-rotation", refit, False, reasons, tuple(checks) + tuple(rot_checks),
@@ -191,10 +206,12 @@ def evidence(
     seed: Extrinsic,
     res: Extrinsic,
     settings: CalibrationSettings,
+    second: tuple[str, Callable[[Extrinsic], float]],
     cancel: threading.Event | None = None,
 ) -> list[Check]:
-    """The checks of ``res`` against ``seed`` on ``final`` (the stack at the final smoothing).
-    With ``settings.rotation_only`` the translation is the seed's and only the rotation is tested."""
+    """The checks of ``res`` against ``seed`` on ``final`` (the stack at the final smoothing),
+    ``second`` being :func:`second_score` of it. With ``settings.rotation_only`` the
+    translation is the seed's and only the rotation is tested."""
     rotation_only = settings.rotation_only
     tag = " (rotation only)" if rotation_only else ""
     # agreement is asked to the precision the move from the seed needs: independent estimates
@@ -204,8 +221,8 @@ def evidence(
     s_seed, s_res = final.score(seed, per_scene=False)[0], final.score(res, per_scene=False)[0]
     checks.append(Check("score" + tag, s_res > s_seed, f"{final.objective_name} score {s_seed:.4f} -> {s_res:.4f}"))
 
-    name, before = second_score(final, seed)
-    _, after = second_score(final, res)
+    name, score2 = second
+    before, after = score2(seed), score2(res)
     slack = SECOND_SCORE_SLACK if name.startswith("edge") else 0.0
     checks.append(Check("second score" + tag, after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
 
