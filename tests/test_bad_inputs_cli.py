@@ -177,6 +177,16 @@ def _npy_seed(tmp: Path, arr: np.ndarray):
     return ["calibrate", "--scenes", tmp / "scenes", "--seed", f, "--quiet", "--out", tmp / "r.yaml"], f
 
 
+#: Paths that are not regular files: refused before they are opened (a FIFO or /dev/zero never ends).
+SPECIAL_FILE_CASES = {
+    "seed-fifo": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--seed", _fifo(tmp), "--quiet"],
+                               tmp / "fifo.yaml"), ["not a regular file"]),  # reading it would block forever
+    "camera-dev-zero": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--camera", "/dev/zero", "--quiet"],
+                                     "/dev/zero"), ["not a regular file"]),  # reading it would never end
+    "seed-folder": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--seed", tmp / "scenes", "--quiet"],
+                                 tmp / "scenes"), ["not a regular file"]),
+}
+
 OPTION_CASES = {
     "bound-m-1e9": (_option_case("--bound-m", "1e9"), ["--bound-m"]),
     "bound-m-nan": (_option_case("--bound-m", "nan"), ["--bound-m"]),
@@ -577,7 +587,7 @@ SERVE_CASES = {
                             ["not empty"]),
 }
 
-ALL_CASES = {**SERVE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
+ALL_CASES = {**SERVE_CASES, **SPECIAL_FILE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
