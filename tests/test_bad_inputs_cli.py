@@ -705,3 +705,29 @@ def test_a_huge_upload_is_refused_before_parsing() -> None:
 
     with pytest.raises(InputError, match="big.yaml: is 200.0 MiB"):
         seed_from_upload("big.yaml", b"#" * (200 * 2**20))
+
+
+def test_kill_9_during_calibrate_keeps_a_complete_result(tmp: Path) -> None:
+    """calibrate killed at several moments: the result file is always the old or a new complete
+    one, and the next run leaves no temporary file behind."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from l2e_studio.atomic import temporaries
+    from l2e_studio.io.cameras import load_seed
+
+    out = tmp / "r.yaml"
+    args = [sys.executable, "-m", "l2e_studio", "calibrate", "--scenes", str(tmp / "scenes"), "--quiet",
+            "--single-stage", "--out", str(out)]
+    assert subprocess.run(args, capture_output=True, timeout=120).returncode == 0
+    for delay in (0.3, 0.8, 1.3, 1.8, 2.5):
+        proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        for f in [out, *tmp.glob("r.*.bak.yaml")]:
+            load_seed(f)  # every result and backup parses: none is half written
+    assert subprocess.run(args, capture_output=True, timeout=120).returncode == 0
+    assert temporaries(out) == []
