@@ -168,8 +168,9 @@ def _read_opencv_storage(path: Path) -> dict:
 
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        raise InputError(path, f"malformed OpenCV FileStorage ({str(exc).strip().splitlines()[-1]})") from None
+    except (cv2.error, SystemError) as exc:  # the binding reports a parse error as SystemError
+        cause = exc.__cause__ or exc
+        raise InputError(path, f"malformed OpenCV FileStorage ({str(cause).strip().splitlines()[-1]})") from None
     try:
         if not fs.isOpened():
             raise InputError(path, "cannot open as an OpenCV FileStorage YAML/XML file")
