@@ -126,6 +126,16 @@ CAMERA_CASES = {
     "K-principal-point-outside": (_camera_case(_ours(K=[[300, 0, 5000], [0, 300, 90], [0, 0, 1]])),
                                   ["principal point"]),
     "D-strings": (_camera_case(_ours(D="abc")), ["camera.D"]),
+    "opencv-yaml-truncated": (_camera_case("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
+                                           "   dt: d\n   data: [ 300., 0., 160.,"), ["camera.yaml"]),
+    "opencv-yaml-2x2-matrix": (_camera_case("%YAML:1.0\n---\nimage_width: 320\nimage_height: 180\ncamera_matrix: "
+                                            "!!opencv-matrix\n   rows: 2\n   cols: 2\n   dt: d\n   data: [ 1., 0., 0., 1. ]\n"),
+                               ["camera_matrix must be 3x3"]),
+    "ros-camera-info-text-K": (_camera_case(yaml.safe_dump({"image_width": 320, "image_height": 180, "camera_matrix": {
+        "rows": 3, "cols": 3, "data": ["a"] * 9}, "distortion_model": "plumb_bob"})), ["not numeric"]),
+    "reference-json-no-K": (_camera_case(json.dumps({"cam": {"D": [0, 0, 0, 0, 0]}}), "config.json"), ["cam.K"]),
+    "unknown-distortion-model": (_camera_case(_ours(model="wobbly")), ["wobbly"]),
+    "radtan-7-coefficients": (_camera_case(_ours(D=[0] * 7)), ["7"]),
     "not-utf8": (_camera_case(b"\xff\xfe\x00camera\x80\x81"), ["UTF-8"]),
     "empty": (_camera_case(""), ["empty"]),
     "top-level-list": (_camera_case("- 1\n- 2\n"), ["mapping"]),
@@ -176,6 +186,16 @@ def _npy_seed(tmp: Path, arr: np.ndarray):
     np.save(f, arr, allow_pickle=True)
     return ["calibrate", "--scenes", tmp / "scenes", "--seed", f, "--quiet", "--out", tmp / "r.yaml"], f
 
+
+#: Paths that are not regular files: refused before they are opened (a FIFO or /dev/zero never ends).
+SPECIAL_FILE_CASES = {
+    "seed-fifo": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--seed", _fifo(tmp), "--quiet"],
+                               tmp / "fifo.yaml"), ["not a regular file"]),  # reading it would block forever
+    "camera-dev-zero": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--camera", "/dev/zero", "--quiet"],
+                                     "/dev/zero"), ["not a regular file"]),  # reading it would never end
+    "seed-folder": (lambda tmp: (["calibrate", "--scenes", tmp / "scenes", "--seed", tmp / "scenes", "--quiet"],
+                                 tmp / "scenes"), ["not a regular file"]),
+}
 
 OPTION_CASES = {
     "bound-m-1e9": (_option_case("--bound-m", "1e9"), ["--bound-m"]),
@@ -487,6 +507,11 @@ def _accumulate_into_file(tmp: Path) -> tuple[list, Path]:
     return args, tmp / "ev" / "event"
 
 
+def _random_file(path: Path) -> Path:
+    path.write_bytes(RNG.bytes(4096))
+    return path
+
+
 def _h5(write: Callable) -> Callable[[Path], list]:
     """An HDF5 recording in ``ev/events_raw/a.h5`` written by ``write(h5py.File)``, through ``accumulate``."""
     def build(tmp: Path) -> list:
@@ -547,6 +572,13 @@ EVENT_CASES = {
     "accumulate-event-dir-is-a-file": (_accumulate_into_file, ["event"]),
     "synth-parent-is-a-file": (lambda tmp: (["synth", "--out", tmp / "scenes" / "camera.yaml" / "new", "--preset", "sample"],
                                             tmp / "scenes" / "camera.yaml"), ["is a file"]),
+    "aedat4-random-bytes": (_events_case("a.aedat4", lambda: RNG.bytes(4096)), ["a.aedat4"]),
+    "events-txt-words": (_events_case("a.txt", lambda: b"t x y p\nsoon left up on\n" * 10), ["a.txt"]),
+    "events-txt-negative-y": (_events_case("a.txt", lambda: b"0.1 5 -3 1\n0.2 6 4 0\n"), ["a.txt"]),
+    "extract-random-bytes-bag": (lambda tmp: (["extract", _random_file(tmp / "x.bag"), "--out", tmp / "o"],
+                                              tmp / "x.bag"), ["x.bag"]),
+    "extract-missing-bag": (lambda tmp: (["extract", tmp / "nope.bag", "--out", tmp / "o"], tmp / "nope.bag"),
+                            ["nope.bag"]),
     "events-window-nan": (_events_case("a.npz", _events, "--window", "nan", names_option=True), ["--window"]),
     "events-window-negative": (_events_case("a.npz", _events, "--window", "-3", names_option=True), ["--window"]),
     "events-window-1e12": (_events_case("a.npz", _events, "--window", "1e12", names_option=True), ["--window"]),
@@ -577,7 +609,7 @@ SERVE_CASES = {
                             ["not empty"]),
 }
 
-ALL_CASES = {**SERVE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
+ALL_CASES = {**SERVE_CASES, **SPECIAL_FILE_CASES, **CAMERA_CASES, **SEED_CASES, **OPTION_CASES, **OUTPUT_CASES, **SCENE_CASES, **EVENT_CASES}
 
 
 @pytest.mark.parametrize("name", sorted(ALL_CASES))
@@ -695,3 +727,29 @@ def test_a_huge_upload_is_refused_before_parsing() -> None:
 
     with pytest.raises(InputError, match="big.yaml: is 200.0 MiB"):
         seed_from_upload("big.yaml", b"#" * (200 * 2**20))
+
+
+def test_kill_9_during_calibrate_keeps_a_complete_result(tmp: Path) -> None:
+    """calibrate killed at several moments: the result file is always the old or a new complete
+    one, and the next run leaves no temporary file behind."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from l2e_studio.atomic import temporaries
+    from l2e_studio.io.cameras import load_seed
+
+    out = tmp / "r.yaml"
+    args = [sys.executable, "-m", "l2e_studio", "calibrate", "--scenes", str(tmp / "scenes"), "--quiet",
+            "--single-stage", "--out", str(out)]
+    assert subprocess.run(args, capture_output=True, timeout=120).returncode == 0
+    for delay in (0.3, 0.8, 1.3, 1.8, 2.5):
+        proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        for f in [out, *tmp.glob("r.*.bak.yaml")]:
+            load_seed(f)  # every result and backup parses: none is half written
+    assert subprocess.run(args, capture_output=True, timeout=120).returncode == 0
+    assert temporaries(out) == []

@@ -120,3 +120,22 @@ def test_synth_and_write_lidar_txt_write_atomically(tmp_path: Path, monkeypatch)
     pts = np.random.default_rng(0).normal(size=(10, 3)) + [0, 0, 5]
     write_lidar_txt(tmp_path / "c.txt", pts, np.arange(10.0))
     assert written[-1] == "c.txt" and len(load_lidar(tmp_path / "c.txt")) == 10
+
+
+def test_every_writer_goes_through_the_atomic_writer() -> None:
+    """No module writes a user-visible file directly (a full disk or a kill would leave half of it);
+    the one exception is the app's private temporary copy of an upload."""
+    import re
+
+    root = Path(__file__).resolve().parents[1] / "l2e_studio"
+    direct = re.compile(r"\.write_(text|bytes)\(|cv2\.imwrite\(|np\.save(txt)?\((?!buf)|open\([^)]*['\"][wa]b?['\"]")
+    allowed = {("app/files.py", "path.write_bytes(content)")}
+    hits = []
+    for path in root.rglob("*.py"):
+        rel = path.relative_to(root).as_posix()
+        if rel == "atomic.py":
+            continue
+        for line in path.read_text().splitlines():
+            if direct.search(line) and (rel, line.strip()) not in allowed:
+                hits.append(f"{rel}: {line.strip()}")
+    assert hits == []

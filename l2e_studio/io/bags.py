@@ -318,7 +318,6 @@ def write_camera_yaml(path: Path, info) -> Path:
         D = (D + [0.0] * 5)[:5]
     doc = {"camera": {"model": model, "width": int(info.width), "height": int(info.height),
                       "K": K.tolist(), "D": D}}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("# written by l2e-studio extract from a sensor_msgs/CameraInfo topic; add a seed: section\n"
-                    + yaml.safe_dump(doc, sort_keys=False))
+    atomic_write_bytes(path, ("# written by l2e-studio extract from a sensor_msgs/CameraInfo topic; add a seed: section\n"
+                              + yaml.safe_dump(doc, sort_keys=False)).encode())
     return path

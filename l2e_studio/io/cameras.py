@@ -175,7 +175,11 @@ def _read_document(path: Path) -> Any:
 def _read_opencv_storage(path: Path) -> dict:
     import cv2
 
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as exc:  # the binding reports a parse error as SystemError
+        cause = exc.__cause__ or exc
+        raise InputError(path, f"malformed OpenCV FileStorage ({str(cause).strip().splitlines()[-1]})") from None
     try:
         if not fs.isOpened():
             raise InputError(path, "cannot open as an OpenCV FileStorage YAML/XML file")

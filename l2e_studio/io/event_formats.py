@@ -149,8 +149,28 @@ def _aedat_arrays(ev: np.ndarray) -> Arrays:
 
 # --- HDF5 --------------------------------------------------------------------------------
 
+#: What to say when an HDF5 dataset uses a compression filter h5py cannot decode.
+HDF5_FILTER_HINT = ("compressed with an HDF5 filter h5py lacks (blosc, zstd, lz4...): pip install 'l2e-studio[hdf5]' "
+                    "(hdf5plugin). Prophesee's ECF codec is not available in Python: convert the file with "
+                    "metavision_file_to_hdf5 without --ecf, or to .raw/.dat")
+
+
 def _hdf5(path: Path, chunk: int) -> Iterator[Arrays]:
+    try:
+        yield from _hdf5_events(path, chunk)
+    except OSError as exc:
+        if "filter" in str(exc).lower() or "plugin" in str(exc).lower():
+            raise InputError(path, HDF5_FILTER_HINT) from None
+        raise
+
+
+def _hdf5_events(path: Path, chunk: int) -> Iterator[Arrays]:
     import h5py
+
+    try:  # registers blosc/zstd/lz4/... filters with h5py when the [hdf5] extra is installed
+        import hdf5plugin  # type: ignore[import-not-found]  # noqa: F401
+    except ImportError:
+        pass
 
     try:
         f = h5py.File(path, "r")
@@ -196,7 +216,9 @@ def _hdf5(path: Path, chunk: int) -> Iterator[Arrays]:
                 x, y = _coords(path, rec["x"], rec["y"])
                 yield x, y, _to_us(rec[tn]) + offset, _polarity(rec[pn])
         except OSError as exc:
-            raise InputError(path, f"cannot read the event table ({exc}); Prophesee ECF-compressed HDF5 needs its plugin") from None
+            if "filter" in str(exc).lower() or "plugin" in str(exc).lower():
+                raise
+            raise InputError(path, f"cannot read the event table ({exc})") from None
 
 
 def _pick(names, wanted) -> str | None:

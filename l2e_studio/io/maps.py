@@ -138,7 +138,7 @@ def _read_image(path: Path, width: int | None = None, height: int | None = None)
         w, h = declared
         if not (0 < w <= MAX_IMAGE_SIDE and 0 < h <= MAX_IMAGE_SIDE):
             raise InputError(path, f"the PNG declares {w}x{h} pixels; at most {MAX_IMAGE_SIDE} a side are read")
-        _check_size(path, np.empty((h, w, 0)), width, height)
+        _check_dims(path, w, h, width, height)
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputError(path, "cannot decode the image (corrupt, truncated or not an image)")
@@ -180,6 +180,11 @@ def _read_npy_map(path: Path) -> np.ndarray:
 
 def _check_size(path: Path, image: np.ndarray, width: int | None, height: int | None) -> None:
     h, w = image.shape[:2]
+    _check_dims(path, w, h, width, height)
+
+
+def _check_dims(path: Path, w: int, h: int, width: int | None, height: int | None) -> None:
+    """A ``w`` x ``h`` map must match the camera's ``width`` x ``height`` where they are known."""
     if (width is not None and w != int(width)) or (height is not None and h != int(height)):
         want = f"{width if width is not None else '?'}x{height if height is not None else '?'}"
         raise InputError(path, f"map is {w}x{h}, camera expects {want}")
