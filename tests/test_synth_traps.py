@@ -67,7 +67,8 @@ def test_event_realism_keeps_the_l2e_case_calibrating(tmp_path: Path) -> None:
     m = cv2.imread(str(folder / "event" / "scene_000.png"), cv2.IMREAD_GRAYSCALE)
     assert (m[int(270 * 0.9):] <= 10).mean() > 0.95  # the occluded band
     for seed, raw, handed, status, _ in _run(folder, "mi", 1):
-        assert raw < 0.3 < seed and status == "trusted" and handed == pytest.approx(raw)
+        # four small scenes pin the rotation; whether they pin the translation is the verdict's call
+        assert raw < 0.3 < seed and status in ("trusted", "trusted-rotation") and handed < seed
 
 
 def test_unknown_traps_are_refused() -> None:
