@@ -46,15 +46,19 @@ def test_seed_coverage_counts_points_in_the_image(small_synth) -> None:
         check_seed_coverage(pts, camera, flipped, "seed.yaml")
 
 
-def test_a_non_utf8_file_name_loads_and_is_cached(scene_dir_copy: Path) -> None:
+def test_a_non_utf8_file_name_loads_and_is_cached(scene_dir_copy: Path, tmp_path: Path, monkeypatch) -> None:
     import os
 
+    from l2e_studio.cachedir import folder_key, user_cache_dir
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     for sub, ext in (("lidar", "txt"), ("event", "png")):
         os.rename(scene_dir_copy / sub / f"scene_000.{ext}", os.fsencode(scene_dir_copy / sub) + f"/scene_\xff.{ext}".encode("latin-1"))
     for _ in range(2):  # the second load reads the scan cache
         ss = load_scene_folder(scene_dir_copy)
         assert "scene_\udcff" in ss.names and not ss.failures
-    assert any(p.name.startswith("scene_\udcff.txt.") for p in (scene_dir_copy / ".l2e_cache").iterdir())
+    cache = user_cache_dir("scans", folder_key(scene_dir_copy))  # the user's cache folder, not the data folder
+    assert any(p.name.startswith("scene_\udcff.txt.") for p in cache.iterdir())
 
 
 def test_extract_refuses_clouds_without_intensity(tmp_path: Path, monkeypatch) -> None:
