@@ -49,6 +49,7 @@ def test_heldout_cli_table(folder, calibrated, tmp_path, capsys):
     rc = cli_main(["heldout", "--scenes", str(folder), "--candidate", f"release={calibrated}", "--held-out", "scene_004",
                    "--group", "early=scene_000,scene_001", "--calibrate", "--out", str(out)])
     assert rc == 0
+    assert capsys.readouterr().out.count("scenes pooled]") == 5  # one row per group, not eaten as markup
     t = json.loads(out.read_text())
     assert [c["name"] for c in t["candidates"]] == ["seed", "result", "truth", "release"]
     assert set(t["groups"]) == {"held out", "training", "early", "rest", "all"}
