@@ -20,7 +20,7 @@ def data_uri_png(rgb: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode()
 
 
-def data_uri_jpeg(rgb: np.ndarray, quality: int = 90) -> str:
+def data_uri_jpeg(rgb: np.ndarray, quality: int = 80) -> str:
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR),
                            [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:

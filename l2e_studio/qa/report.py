@@ -1,6 +1,6 @@
 """``l2e-studio report``: one self-contained HTML file a reviewer opens offline.
 
-Every figure is embedded as a base64 data URI (plots as PNG, overlays as JPEG at quality 90 to
+Every figure is embedded as a base64 data URI (plots as PNG, overlays and crops as JPEG, quality 80-85, to
 keep 40 full-size scenes in a file of reasonable size); no script, font or style is fetched.
 The numbers behind the page are embedded too, as JSON in ``<script type="application/json"
 id="l2e-qa-data">``.
@@ -315,8 +315,8 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         add(f"<h3>{_e(sc.name)}{_e(mi)}</h3><div class='pair'>"
             f"<figure><img alt='{_e(sc.name)} seed' src='{figures.data_uri_jpeg(before)}'><figcaption>seed, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
             f"<figure><img alt='{_e(sc.name)} result' src='{figures.data_uri_jpeg(after)}'><figcaption>result, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_png(figures.zoom(before, box, 2, f))}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_png(figures.zoom(after, box, 2, f))}'><figcaption>result, same crop</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(figures.zoom(before, box, 2, f), 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_jpeg(figures.zoom(after, box, 2, f), 85)}'><figcaption>result, same crop</figcaption></figure>"
             "</div>")
 
     # settings and checksums
