@@ -252,3 +252,9 @@ def test_half_sample_bootstrap_gives_a_spread_per_parameter(tiny):
     u = from_half_samples(st.params())
     assert u.samples == 6 and np.all(np.isfinite(u.std)) and np.all(u.std > 0)
     assert np.all(u.std[:3] < 30) and np.all(u.std[3:] < 0.5)
+
+
+def test_held_out_scenes_that_the_calibration_used_are_flagged():
+    assert guardrails.held_out_used(["a"], ["b", "c"]) == []
+    w = guardrails.held_out_used(["a", "c"], ["b", "c"])
+    assert [x.code for x in w] == ["held_out_used"] and "c" in w[0].message

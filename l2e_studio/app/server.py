@@ -31,6 +31,7 @@ from .panels.compare import ComparePanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
 from .panels.pairs import PairsPanel
+from .panels.qa import QAPanel
 from .panels.overlay_view import OverlayPanel
 from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
@@ -84,6 +85,8 @@ class App:
             self.optimise = OptimisePanel(self)
         with tabs.add_tab("Result", viser.Icon.CHECKLIST):
             self.results = ResultPanel(self)
+        with tabs.add_tab("QA", viser.Icon.REPORT_ANALYTICS):
+            self.qa = QAPanel(self)
         self.compare = ComparePanel(self, self.overlay)
         self.view3d = View3D(self)
 

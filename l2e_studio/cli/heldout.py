@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from ..calibrate import calibrate, stack_scenes
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     for c in cands:
         t.add_column(c.name, justify="right")
     for row in table.rows():
-        t.add_row(*row)
+        t.add_row(*[escape(c) for c in row])
     con.print(t)
     d = Table(title="differences")
     for col in ("a", "b", "rotation deg", "translation mm"):

@@ -20,7 +20,7 @@ def data_uri_png(rgb: np.ndarray) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode()
 
 
-def data_uri_jpeg(rgb: np.ndarray, quality: int = 90) -> str:
+def data_uri_jpeg(rgb: np.ndarray, quality: int = 80) -> str:
     ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR),
                            [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
@@ -28,20 +28,29 @@ def data_uri_jpeg(rgb: np.ndarray, quality: int = 90) -> str:
     return "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode()
 
 
+def display_factor(camera: CameraModel) -> int:
+    """Small maps are drawn enlarged (nearest neighbour) so that points and edges stay visible."""
+    return max(1, int(round(800 / camera.width)))
+
+
 def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ext: Extrinsic, camera: CameraModel,
-            clip: float = 127.0, radius: int | None = None) -> np.ndarray:
-    """The event map in grey with the lidar points projected at ``ext``, coloured by intensity."""
+            clip: float = 127.0, radius: int = 1) -> np.ndarray:
+    """The event map in grey with the lidar points projected at ``ext`` as small discs coloured by
+    intensity (turbo). Maps narrower than 800 px are enlarged by :func:`display_factor` first."""
+    f = display_factor(camera)
     m = np.clip(np.asarray(event_map, np.float32), 0, clip)
     hi = float(np.percentile(m, 99.5)) or 1.0
-    grey = (np.clip(m / hi, 0, 1) * 255).astype(np.uint8)
-    if radius is None:  # single pixels on small maps, 3 px discs on full-size ones
-        radius = 0 if camera.width < 800 else 1
+    grey = (np.clip(m / hi, 0, 1) * 200).astype(np.uint8)  # keep the map darker than the points
+    if f > 1:
+        grey = cv2.resize(grey, (camera.width * f, camera.height * f), interpolation=cv2.INTER_NEAREST)
     img = cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
     cam_pts = ext.transform(np.asarray(points, np.float64))
     front = cam_pts[:, 2] > 0.05
     uv, _ = project_points(cam_pts[front], camera)
     inside = in_image(uv, camera)
-    uv = np.rint(uv[inside]).astype(np.int32)
+    uv = np.rint((uv[inside] + 0.5) * f - 0.5).astype(np.int32)
+    uv[:, 0] = np.clip(uv[:, 0], 0, img.shape[1] - 1)
+    uv[:, 1] = np.clip(uv[:, 1], 0, img.shape[0] - 1)
     val = np.clip(np.asarray(intensity, np.float64)[front][inside], 0, 255).astype(np.uint8)
     colors = cv2.applyColorMap(val[:, None], cv2.COLORMAP_TURBO)[:, 0, ::-1]
     layer = np.zeros_like(img)
@@ -52,13 +61,14 @@ def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ex
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         layer = cv2.dilate(layer, k)
         mask = cv2.dilate(mask, k)
-    img[mask > 0] = (0.35 * img[mask > 0] + 0.65 * layer[mask > 0]).astype(np.uint8)
+    sel = mask > 0
+    img[sel] = (0.2 * img[sel] + 0.8 * layer[sel]).astype(np.uint8)
     return img
 
 
 def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, int]:
     """(x0, y0, w, h) of the ``frac``-sized window with the most event structure (gradient energy)."""
-    m = np.asarray(event_map, np.float32)
+    m = cv2.GaussianBlur(np.asarray(event_map, np.float32), (0, 0), 3.0)  # structure, not pixel noise
     H, W = m.shape
     w, h = max(8, int(W * frac)), max(8, int(H * frac))
     g = np.abs(cv2.Sobel(m, cv2.CV_32F, 1, 0)) + np.abs(cv2.Sobel(m, cv2.CV_32F, 0, 1))
@@ -71,8 +81,9 @@ def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, i
     return int(cx - w // 2), int(cy - h // 2), w, h
 
 
-def zoom(img: np.ndarray, box: tuple[int, int, int, int], factor: int = 2) -> np.ndarray:
-    x, y, w, h = box
+def zoom(img: np.ndarray, box: tuple[int, int, int, int], factor: int = 2, scale: int = 1) -> np.ndarray:
+    """The ``box`` (map pixels; the image is the map enlarged ``scale`` times) enlarged ``factor`` times."""
+    x, y, w, h = (v * scale for v in box)
     return cv2.resize(img[y:y + h, x:x + w], (w * factor, h * factor), interpolation=cv2.INTER_NEAREST)
 
 

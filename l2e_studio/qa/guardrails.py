@@ -103,3 +103,12 @@ def flat_landscape(sweeps: list, max_half_width_m: float = 0.04, max_half_width_
         if s.secondary_ratio() >= ambiguous:
             out.append(Warning("ambiguous", f"a second peak along {s.axis} reaches {100 * s.secondary_ratio():.0f}% of the main one"))
     return out
+
+
+def held_out_used(held_out: list[str], used: list[str] | None) -> list[Warning]:
+    """Scenes marked held out that the calibration did use: their scores are not held-out scores."""
+    both = [s for s in held_out if used and s in used]
+    if not both:
+        return []
+    return [Warning("held_out_used", f"{len(both)} scene(s) marked held out were used by the calibration: "
+                    f"{', '.join(both[:8])}{' ...' if len(both) > 8 else ''}; their scores are not held-out scores")]

@@ -1,6 +1,6 @@
 """``l2e-studio report``: one self-contained HTML file a reviewer opens offline.
 
-Every figure is embedded as a base64 data URI (plots as PNG, overlays as JPEG at quality 90 to
+Every figure is embedded as a base64 data URI (plots as PNG, overlays and crops as JPEG, quality 80-85, to
 keep 40 full-size scenes in a file of reasonable size); no script, font or style is fetched.
 The numbers behind the page are embedded too, as JSON in ``<script type="application/json"
 id="l2e-qa-data">``.
@@ -121,7 +121,8 @@ def build(inp: ReportInputs, on_progress: Callable[[str], None] | None = None) -
     warns = (guardrails.held_out_below_seed(table) + guardrails.on_bound(inp.extrinsic, inp.seed, inp.settings)
              + guardrails.few_points(names, table.points_in_image[ri])
              + guardrails.few_scenes(len(names) - int(held.sum()), unc[0].std if unc else None, inp.wanted_mm, inp.wanted_deg)
-             + guardrails.flat_landscape(sw))
+             + guardrails.flat_landscape(sw)
+             + guardrails.held_out_used([n for n, h in zip(names, held) if h], inp.result.get("scenes")))
     true_err = correction(inp.truth, inp.extrinsic) if inp.truth is not None else None
 
     data = {
@@ -307,14 +308,15 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         before = figures.overlay(sc.event_map, sc.points, sc.intensity, inp.seed, cam, clip)
         after = figures.overlay(sc.event_map, sc.points, sc.intensity, ext, cam, clip)
         box = figures.crop_box(sc.event_map)
+        f = figures.display_factor(cam)
         j = table.scenes.index(sc.name) if sc.name in table.scenes else -1
         mi = (f" - MI seed {_fmt(table.per_scene[0, j])}, result {_fmt(table.per_scene[1, j])}"
               + (" (held out)" if table.held_out[j] else "")) if j >= 0 else ""
         add(f"<h3>{_e(sc.name)}{_e(mi)}</h3><div class='pair'>"
-            f"<figure><img alt='{_e(sc.name)} seed' src='{figures.data_uri_jpeg(before)}'><figcaption>seed, full resolution</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} result' src='{figures.data_uri_jpeg(after)}'><figcaption>result, full resolution</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_png(figures.zoom(before, box))}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px at 2x</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_png(figures.zoom(after, box))}'><figcaption>result, same crop</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} seed' src='{figures.data_uri_jpeg(before)}'><figcaption>seed, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} result' src='{figures.data_uri_jpeg(after)}'><figcaption>result, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(figures.zoom(before, box, 2, f), 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_jpeg(figures.zoom(after, box, 2, f), 85)}'><figcaption>result, same crop</figcaption></figure>"
             "</div>")
 
     # settings and checksums
