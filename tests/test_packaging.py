@@ -65,9 +65,12 @@ def test_cli_defaults_match_the_engine() -> None:
 
     s = engine.CalibrationSettings()
     assert cli.METHODS == engine.METHODS
+    from l2e_studio.cli.export import FORMAT_NAMES
+    from l2e_studio.export import EXPORT_FORMATS
     from l2e_studio.verdict import ON_UNTRUSTED
 
     assert cli.ON_UNTRUSTED == ON_UNTRUSTED
+    assert FORMAT_NAMES == tuple(EXPORT_FORMATS)
     assert cli.DEFAULTS == {"translation_bound": s.translation_bound, "rotation_bound_deg": s.rotation_bound_deg,
                             "sigma": s.sigma}
 

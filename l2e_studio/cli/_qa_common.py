@@ -8,26 +8,25 @@ import sys
 import tempfile
 from pathlib import Path
 
-import yaml
-
-from ..atomic import atomic_write_bytes
-from ..calibrate import CalibrationSettings
 from ..errors import InputError
-from ..geometry import Extrinsic
 
 
 def add_scene_args(p: argparse.ArgumentParser, bounds: bool = True) -> None:
+    from .calibrate import DEFAULTS  # the CLI's copy of the engine defaults: no engine import for --help
+
     p.add_argument("--scenes", type=Path, help="scene folder (default: the embedded sample)")
     p.add_argument("--seed", type=Path, help="seed extrinsic file (overrides the folder's)")
     p.add_argument("--camera", type=Path, help="camera file (default: the folder's)")
     p.add_argument("--truth", type=Path, help="true extrinsic, when known (default: DIR/truth.yaml if present)")
     if bounds:
-        p.add_argument("--bound-m", type=float, default=CalibrationSettings.translation_bound, help="translation bound, m (default: %(default)s)")
-        p.add_argument("--bound-deg", type=float, default=CalibrationSettings.rotation_bound_deg, help="rotation bound, deg (default: %(default)s)")
-        p.add_argument("--sigma", type=float, default=CalibrationSettings.sigma, help="map smoothing, px (default: %(default)s)")
+        p.add_argument("--bound-m", type=float, default=DEFAULTS["translation_bound"], help="translation bound, m (default: %(default)s)")
+        p.add_argument("--bound-deg", type=float, default=DEFAULTS["rotation_bound_deg"], help="rotation bound, deg (default: %(default)s)")
+        p.add_argument("--sigma", type=float, default=DEFAULTS["sigma"], help="map smoothing, px (default: %(default)s)")
 
 
 def settings(args: argparse.Namespace, **kw) -> CalibrationSettings:
+    from ..calibrate import CalibrationSettings
+
     try:
         return CalibrationSettings(translation_bound=args.bound_m, rotation_bound_deg=args.bound_deg, sigma=args.sigma, **kw)
     except ValueError as exc:
@@ -75,6 +74,8 @@ def check_writable(path: Path) -> None:
 
 def write(path: Path, data: bytes) -> Path | None:
     """Atomic write (an existing file is kept as a backup); an unwritable place is one InputError."""
+    from ..atomic import atomic_write_bytes
+
     try:
         return atomic_write_bytes(path, data, keep_existing=True)
     except OSError as exc:
@@ -82,6 +83,8 @@ def write(path: Path, data: bytes) -> Path | None:
 
 
 def dump(data: dict, path: Path) -> bytes:
+    import yaml
+
     import json
 
     if str(path).lower().endswith(".json"):
@@ -90,6 +93,8 @@ def dump(data: dict, path: Path) -> bytes:
 
 
 def read_doc(path: Path) -> dict:
+    import yaml
+
     import json
 
     if not Path(path).is_file():

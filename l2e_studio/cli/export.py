@@ -7,24 +7,28 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ..export import EXPORT_FORMATS, export_text
-from ..io.cameras import load_seed
-from ._qa_common import check_writable, read_doc, write
 
 NAME = "export"
 HELP = "Write a calibration as 4x4 text, ROS 1/ROS 2 static_transform_publisher, URDF joint, Kalibr YAML, YAML or JSON."
+#: The engine's export formats, written out so that ``--help`` needs no engine import
+#: (tests/test_packaging.py checks them against :data:`l2e_studio.export.EXPORT_FORMATS`).
+FORMAT_NAMES = ("yaml", "json", "matrix", "ros1", "ros2", "urdf", "kalibr")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path, help="result file (or any file --seed reads)")
     p.add_argument("--format", action="append", default=[], metavar="FMT",
-                   help=f"one of {', '.join(EXPORT_FORMATS)}, or 'all'; repeatable (default: all)")
+                   help=f"one of {', '.join(FORMAT_NAMES)}, or 'all'; repeatable (default: all)")
     p.add_argument("--out", type=Path, help="output file (one format) or folder (several); default: print to stdout")
     p.add_argument("--camera-frame", default="camera", help="camera frame / link name (default: %(default)s)")
     p.add_argument("--lidar-frame", default="lidar", help="lidar frame / link name (default: %(default)s)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..export import EXPORT_FORMATS, export_text
+    from ..io.cameras import load_seed
+    from ._qa_common import check_writable, read_doc, write
+
     fmts: list[str] = []
     for f in args.format or ["all"]:
         for name in f.split(","):

@@ -6,19 +6,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-from rich.markup import escape
-from rich.table import Table
-
-from ..calibrate import calibrate, stack_scenes
-from ..qa.heldout import Candidate, load_candidates, parse_groups, score, split_scenes
-from . import _qa_common as common
 
 NAME = "heldout"
 HELP = "Score candidate calibrations scene by scene, per group and on held-out scenes (the paper's Table III)."
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from . import _qa_common as common
+
     common.add_scene_args(p)
     p.add_argument("--candidate", action="append", default=[], metavar="NAME=FILE",
                    help="a calibration to score (result file, seed file, previous release...); repeatable")
@@ -34,6 +29,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+    from ..calibrate import calibrate, stack_scenes
+    from ..qa.heldout import Candidate, load_candidates, parse_groups, score, split_scenes
+    from . import _qa_common as common
+
     settings = common.settings(args, method=args.method)
     groups = parse_groups(args.group)
     candidates = load_candidates(args.candidate)

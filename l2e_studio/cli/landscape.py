@@ -5,16 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..calibrate import stack_scenes
-from ..io.cameras import load_seed
-from ..qa.landscape import axis_index, sweep2d, sweeps
-from . import _qa_common as common
 
 NAME = "landscape"
 HELP = "Sweep the MI along each of the six parameters (and over two of them) around an extrinsic."
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from . import _qa_common as common
+
     common.add_scene_args(p)
     p.add_argument("--at", type=Path, help="extrinsic at the centre (result file...; default: the seed)")
     p.add_argument("--span-m", type=float, default=0.05, help="+- translation span, m (default: %(default)s)")
@@ -25,6 +23,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..calibrate import stack_scenes
+    from ..io.cameras import load_seed
+    from ..qa.landscape import axis_index, sweep2d, sweeps
+    from . import _qa_common as common
+
     pair = [a for a in args.pair.split(",") if a]
     if pair and len(pair) != 2:
         from ..errors import InputError

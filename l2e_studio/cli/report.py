@@ -6,14 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
-from ..geometry import Extrinsic
-from ..io.cameras import load_seed
-from ..qa.heldout import load_candidates, parse_groups, split_scenes
-from ..qa.report import ReportInputs, build, settings_from_result
-from . import _qa_common as common
 
 NAME = "report"
 HELP = "Write a self-contained HTML QA report of a calibration (overlays, tables, landscapes, studies, exports)."
@@ -37,6 +30,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+    from ..geometry import Extrinsic
+    from ..io.cameras import load_seed
+    from ..qa.heldout import load_candidates, parse_groups, split_scenes
+    from ..qa.report import ReportInputs, build, settings_from_result
+    from . import _qa_common as common
+
     if args.out.suffix.lower() not in (".html", ".htm"):
         raise InputError(args.out, "the report is an HTML file: give a name ending in .html")
     common.check_writable(args.out)

@@ -8,23 +8,16 @@ import sys
 import threading
 from pathlib import Path
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
-
-from ..calibrate import METHODS
 from ..errors import InputError
-from ..io.cameras import load_seed
-from ..qa import AXES, UNITS
-from ..qa.studies import StackSource, check_study_args, repeatability_specs, scene_count_specs, study
-from ..qa.uncertainty import half_sample_specs
-from . import _qa_common as common
 
 NAME = "study"
 HELP = "Repeatability (perturbed seeds), scene-count and scene-bootstrap studies, in parallel processes or on Dask."
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from .calibrate import METHODS  # the CLI's copy: no engine import for --help
+    from . import _qa_common as common
+
     p.add_argument("kind", choices=("repeatability", "scenes", "bootstrap"),
                    help="repeatability: N runs from perturbed seeds; scenes: spread per scene count; "
                         "bootstrap: N recalibrations from --centre on random halves of the scenes")
@@ -44,6 +37,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from ..io.cameras import load_seed
+    from ..qa.studies import StackSource, check_study_args, repeatability_specs, scene_count_specs, study
+    from ..qa.uncertainty import half_sample_specs
+    from . import _qa_common as common
+
     methods = [m for m in args.methods.split(",") if m]
     check_study_args(args.runs, args.noise_m, args.noise_deg, methods)
     if args.workers is not None and args.workers < 1:
@@ -100,6 +100,10 @@ def _default_counts(n: int) -> list[int]:
 
 
 def _print(summary: dict, res) -> None:
+    from rich.console import Console
+    from rich.table import Table
+    from ..qa import AXES, UNITS
+
     con = Console()
     t = Table(title=f"{summary['kind']}: {summary['runs']} runs relative to the {summary['reference']}, "
                     f"wall {summary['wall_seconds']:.1f} s on {summary['executor']}")
