@@ -232,3 +232,26 @@ def test_the_verdict_is_shown_beside_the_result_and_saved(app):
     accepted = app.state.snapshot().extrinsic
     wanted = v.extrinsic if v.trusted else snap.result.extrinsic
     assert np.allclose(accepted.params, wanted.params)
+
+
+def test_camera_images_are_read_out_and_optimised_with_the_edge_score(tmp_path):
+    """Scenes of camera images: the readout shows the score the optimiser climbs (the edge
+    score), labelled as such, and ``objective`` overrides it."""
+    from l2e_studio.app.server import build_app
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.synth import SynthConfig, write_dataset
+
+    folder = write_dataset(tmp_path / "img", SynthConfig(n_scenes=2, width=320, height=180, points_per_scan=6000,
+                                                         seed=4, map_kind="image"))
+    scene_set = load_scene_folder(folder)
+    for objective, name, label in (("auto", "edges", "edge score"), ("mi", "mi", "MI")):
+        a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out", objective=objective)
+        try:
+            assert a.readout.stack.objective_name == name and a.readout.label == label
+            a.mi_worker.wait_idle(10)
+            assert f"**{label} ·" in a.extrinsic.readout.content
+            a.start_run(CalibrationSettings(coarse_to_fine=False))
+            assert a.wait_run(120)
+            assert a.state.snapshot().result.objective == name
+        finally:
+            a.stop()

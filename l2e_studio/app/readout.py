@@ -41,12 +41,14 @@ class MiReadout:
     paper's MI for event maps, the edge score for camera images); a lock orders reads against
     sigma changes."""
 
-    def __init__(self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0) -> None:
+    def __init__(
+        self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0, objective: str = "auto"
+    ) -> None:
         self._lock = threading.Lock()
         self._stack = SceneStack.build(
             scenes, camera, sigma, reference=reference,
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
-            objective=objective_for(sc.map_kind for sc in scenes),
+            objective=objective_for([sc.map_kind for sc in scenes], objective),
         )
 
     @property

@@ -52,7 +52,7 @@ DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # 
 class App:
     """A running workbench. Create with :func:`build_app`; stop with :meth:`stop`."""
 
-    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path) -> None:
+    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path, objective: str = "auto") -> None:
         self.scene_set = scene_set
         self.server = server
         self.camera = scene_set.camera
@@ -60,7 +60,7 @@ class App:
         self.state = SessionState(scene_set.names, reference=scene_set.seed)
         self.displays = [SceneDisplay(s) for s in scene_set.scenes]
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
-        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma)
+        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma, objective)
         self.reading: MiReading | None = None
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self._reference_mi: dict[tuple, float] = {}
@@ -397,12 +397,14 @@ def build_app(
     port: int = 8080,
     out_dir: str | Path | None = None,
     verbose: bool = False,
+    objective: str = "auto",
 ) -> App:
-    """Start a viser server on ``host:port`` and build the workbench on it."""
+    """Start a viser server on ``host:port`` and build the workbench on it; ``objective`` is
+    the score read out and climbed (``auto``: from the map kind)."""
     server = viser.ViserServer(host=host, port=port, label=TITLE, verbose=verbose)
     out = Path(out_dir) if out_dir is not None else default_results_dir(scene_set.root)
     try:
-        return App(scene_set, server, out)
+        return App(scene_set, server, out, objective)
     except BaseException:
         server.stop()
         raise
@@ -415,9 +417,10 @@ def serve(
     out_dir: str | Path | None = None,
     on_ready: Callable[[App], None] | None = None,
     stop: threading.Event | None = None,
+    objective: str = "auto",
 ) -> None:
     """Serve until interrupted (or until ``stop`` is set)."""
-    app = build_app(scene_set, host, port, out_dir)
+    app = build_app(scene_set, host, port, out_dir, objective=objective)
     if on_ready is not None:
         on_ready(app)
     try:

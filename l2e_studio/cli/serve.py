@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..scoring import OBJECTIVES
+
 #: Seconds a host name may take to resolve before --host is reported as unresolvable.
 RESOLVE_TIMEOUT_S = 5.0
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
@@ -24,6 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
     parser.add_argument("--seed", type=Path, default=None, help="seed extrinsic file (overrides the folder's)")
     parser.add_argument("--camera", type=Path, default=None, help="intrinsics file (overrides the folder's)")
+    parser.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
+                        help="score read out and climbed: mi (event maps), edges (camera images); auto picks from the "
+                             "map kind (default)")
+    parser.add_argument("--map-kind", choices=("events", "image"),
+                        help="treat every map as accumulated events or as a camera image (default: from file and content)")
     parser.add_argument("--out", type=Path, default=None,
                         help="folder for result and seed files (default: ./l2e_results/<scene folder name>; "
                              "never inside the scene folder unless given here; changeable in the app)")
@@ -43,9 +50,11 @@ def run(args: argparse.Namespace) -> int:
         check_output_dir(args.out)
     folder = args.scenes if args.scenes is not None else sample_scenes_dir()
     print(f"Loading scenes from {folder} ...", flush=True)
-    scene_set = load_scene_folder(folder, seed_file=args.seed, camera_file=args.camera)
+    scene_set = load_scene_folder(folder, seed_file=args.seed, camera_file=args.camera, map_kind=args.map_kind)
     for failure in scene_set.failures:
         print(f"  scene {failure.name} not loaded: {failure.error}", file=sys.stderr)
+    for note in scene_set.notes:
+        print(f"  note: {note}", file=sys.stderr)
     print(f"  {len(scene_set.scenes)} scenes, camera {scene_set.camera.width}x{scene_set.camera.height}, "
           f"seed from {scene_set.seed_source}", flush=True)
 
@@ -64,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out if args.out is not None or args.scenes is not None else Path("l2e_results")
     try:
-        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready)
+        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready, objective=args.objective)
     except OSError as exc:
         raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
     return 0

@@ -44,7 +44,7 @@ class ExtrinsicPanel:
         gui = app.server.gui
         self.reference = app.state.reference
         self.values = sliders_from_extrinsic(app.state.reference, self.reference)
-        self.readout = gui.add_markdown("MI: computing...")  # on top: visible while nudging at 1366x768
+        self.readout = gui.add_markdown(f"{app.readout.label}: computing...")  # on top: visible while nudging at 1366x768
         self.step = gui.add_dropdown("Step", tuple(STEPS), initial_value="fine: 1 mm / 0.1°")
         self.history = gui.add_button_group("Edit", ("Undo", "Redo"),
                                             hint="Undo / redo extrinsic changes (Ctrl+Z, Ctrl+Shift+Z)")
