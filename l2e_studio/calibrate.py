@@ -176,30 +176,10 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
     else:
         stack = stack_scenes(scenes, camera, seed, settings)
     final = stack.with_sigma(settings.sigma)
-    stages = settings.schedule(stack.camera.width, stack.camera.height)
-    scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
-    free = np.array([not settings.rotation_only] * 3 + [True] * 3)
-    if settings.translation_bound == 0:
-        free[:3] = False
-
     # the seed's score first: a cancelled run then only has its result left to score
     score_seed, per_seed = final.score(seed)
-    run = _Run(stack, seed, settings, scale, free, len(stages), on_progress, cancel, t0)
-    current = seed
-    if _global_search(settings, stack) and len(stages) > 1:
-        # several starts climb every stage, and the seed also skips the coarsest (its blur can
-        # hold side peaks that a seed already in the fine basin should not be dragged to); the
-        # final score picks the answer
-        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
-        climbs = [(seed, 0), (seed, 1)] + [(start, 0) for start in grid]
-        ends = []
-        for start, first in climbs:
-            ends.append(run.climb(start, stages[first:], first=first))
-            if run.cancelled:
-                break
-        current = max(ends, key=lambda e: final.score(e, per_scene=False)[0])
-    else:
-        current = run.climb(seed, stages)
+    run = _search(stack, seed, settings, on_progress, cancel, t0)
+    current = run.end
     cancelled, message, count, history = run.cancelled, run.message, run.count, run.history
 
     score_res, per_res = (score_seed, per_seed) if current is seed else final.score(current)
@@ -222,9 +202,45 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         cancelled=cancelled,
         history=history,
         message=message,
-        stages=stages,
+        stages=settings.schedule(stack.camera.width, stack.camera.height),
         objective=stack.objective_name,
     )
+
+
+def refine(
+    stack: SceneStack, start: Extrinsic, settings: CalibrationSettings, cancel: threading.Event | None = None
+) -> Extrinsic:
+    """Where the search of :func:`calibrate` ends from ``start``, without its bookkeeping
+    (no scores at the seed and the result, no never-worse rule): the probe the verdict uses."""
+    with single_threaded_blas():
+        return _search(stack, start, settings, None, cancel, time.perf_counter()).end
+
+
+def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
+    """Climb the schedule from ``seed`` (from several starts with the global search); the run,
+    its best end point in ``run.end``."""
+    stages = settings.schedule(stack.camera.width, stack.camera.height)
+    scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
+    free = np.array([not settings.rotation_only] * 3 + [True] * 3)
+    if settings.translation_bound == 0:
+        free[:3] = False
+    run = _Run(stack, seed, settings, scale, free, len(stages), on_progress, cancel, t0)
+    if _global_search(settings, stack) and len(stages) > 1:
+        # several starts climb every stage, and the seed also skips the coarsest (its blur can
+        # hold side peaks that a seed already in the fine basin should not be dragged to); the
+        # final score picks the answer
+        final = stack.with_sigma(settings.sigma)
+        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
+        climbs = [(seed, 0), (seed, 1)] + [(start, 0) for start in grid]
+        ends = []
+        for start, first in climbs:
+            ends.append(run.climb(start, stages[first:], first=first))
+            if run.cancelled:
+                break
+        run.end = max(ends, key=lambda e: final.score(e, per_scene=False)[0])
+    else:
+        run.end = run.climb(seed, stages)
+    return run
 
 
 def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
@@ -261,6 +277,7 @@ class _Run:
         self.history: list[tuple[int, float, int]] = []
         self.cancelled = False
         self.message = ""
+        self.end = seed  # where the search ended (set by _search)
 
     def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0) -> Extrinsic:
         """Climb ``stages`` (numbered from ``first``) from ``start``; the best point reached."""

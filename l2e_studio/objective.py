@@ -18,6 +18,8 @@ Two estimators live here:
 from __future__ import annotations
 
 import os
+import threading
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
@@ -292,7 +294,7 @@ class MapObjective:
         S, Hp, Wp = stack.maps.shape
         self._qw = Wp - 1  # row length of the packed map
         self._qh = Hp - 1
-        self._quads = _pack_quads(stack.maps)
+        self._quads = _packed(stack.maps)
         self._scene_base = (stack.scene_of * (self._qh * self._qw)).astype(np.int32)
         self._K = stack.camera.K.astype(np.float32)
         self.n = float(stack.n_points)
@@ -487,6 +489,26 @@ def _run_chunks(work: Callable[[int, int], None], n: int) -> None:
         for a, b in spans:
             work(a, b)
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
+
+
+#: The last few packed maps, keyed by the maps array they came from: stacks made by ``select``
+#: share their maps, so the objectives of a verdict's half-scene refinements (and of a stage
+#: revisited from another start) reuse one packing instead of rewriting ~300 MB each time.
+_PACKED: list[tuple[weakref.ref, np.ndarray]] = []
+_PACKED_KEEP = 2
+_PACKED_LOCK = threading.Lock()
+
+
+def _packed(maps: np.ndarray) -> np.ndarray:
+    """:func:`_pack_quads` of ``maps``, cached while ``maps`` lives (maps are never written after stacking)."""
+    with _PACKED_LOCK:
+        for ref, quads in _PACKED:
+            if ref() is maps:
+                return quads
+    quads = _pack_quads(maps)
+    with _PACKED_LOCK:
+        _PACKED[:] = [(r, q) for r, q in _PACKED if r() is not None][-(_PACKED_KEEP - 1):] + [(weakref.ref(maps), quads)]
+    return quads
 
 
 def _pack_quads(maps: np.ndarray) -> np.ndarray:

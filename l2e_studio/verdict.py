@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from .calibrate import CalibrationResult, CalibrationSettings, calibrate
+from .calibrate import CalibrationResult, CalibrationSettings, refine
 from .geometry import Extrinsic
 from .objective import SceneStack
 from .scoring.edges import canny_distance, lidar_edge_weights
@@ -207,9 +207,9 @@ def judge(
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
         # fit the rotation to it (near the result's), and judge that rotation afresh.
         rotation = replace(settings, rotation_only=True)
-        refit = calibrate(final, None, Extrinsic(res.rotvec, seed.translation),
-                          replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
-                          cancel=cancel).extrinsic
+        refit = refine(final, Extrinsic(res.rotvec, seed.translation),
+                       replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
+                       cancel)
         refit = Extrinsic(refit.rotvec, seed.translation)
         rot_checks = evidence(final, seed, refit, rotation, second, cancel)
         rot_failed = [c for c in rot_checks if not c.passed]
@@ -269,9 +269,12 @@ def evidence(
             h_seed, h_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
             better &= h_res > h_seed
             detail.append(f"{h_seed:.4f} -> {h_res:.4f}")
-            rot_moved.append(calibrate(half, None, res, replace(local, rotation_only=True), cancel=cancel).extrinsic.error_to(res)[0])
+            deg, m = refine(half, res, local, cancel).error_to(res)
             if not rotation_only:
-                trans_moved.append(calibrate(half, None, res, local, cancel=cancel).extrinsic.error_to(res)[1])
+                trans_moved.append(m)
+                if m > AGREE_M:  # a drifting translation confounds the rotation: ask for it alone
+                    deg = refine(half, res, replace(local, rotation_only=True), cancel).error_to(res)[0]
+            rot_moved.append(deg)
         checks.append(Check("both halves prefer the result" + tag, better,
                             "score of each half, seed -> result: " + ", ".join(detail)))
         checks.append(Check("halves agree (rotation)" + tag, max(rot_moved) <= limit_deg,
@@ -286,7 +289,11 @@ def evidence(
     start = mirrored_start(seed, res)
     if rotation_only:
         start = Extrinsic(start.rotvec, res.translation)
-    other = calibrate(final, None, start, settings, cancel=cancel).extrinsic
+    # (a probe, not the answer: every stage on half its point budget)
+    probe = replace(settings, stages=tuple(
+        replace(st, max_points=None if st.max_points is None else st.max_points // 2)
+        for st in settings.schedule(final.camera.width, final.camera.height)))
+    other = refine(final, start, probe, cancel)
     deg, m = other.error_to(res)
     checks.append(Check("second start (rotation)" + tag, deg <= limit_deg,
                         f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {limit_deg:.2f})"))
