@@ -9,9 +9,8 @@ for the marginal and the joint histogram, so smoothing commutes with marginalisa
 Smoothing is written as multiplication by a 256x256 kernel matrix: each count spreads over its
 neighbouring bins with Gaussian weights (truncated at 4 widths), weight that would fall past an end
 bin is reflected back, so no probability mass is lost. Away from the ends this is exactly
-``scipy.ndimage.gaussian_filter``; the explicit matrix gives the adjoint that the analytic
-gradient in :mod:`l2e_studio.objective` needs, and the reporting estimator applies the same
-kernel as a separable filter (:func:`smooth`), which is 15x cheaper per histogram.
+``scipy.ndimage.gaussian_filter``; the explicit matrix also gives the adjoint that the analytic
+gradient in :mod:`l2e_studio.objective` needs.
 """
 
 from __future__ import annotations
@@ -19,7 +18,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 N_BINS = 256
 TRUNCATE = 4.0
@@ -98,18 +96,12 @@ def mi_from_joint_histogram(joint: np.ndarray, h_l: float | None = None, h_e: fl
         h_l = silverman_bandwidth(weighted_std(hist_l), int(round(n)))
     if h_e is None:
         h_e = silverman_bandwidth(weighted_std(hist_e), int(round(n)))
-    p_le = smooth(smooth(joint / n, float(h_l), axis=0), float(h_e), axis=1)
-    p_l = smooth(hist_l / n, float(h_l))
-    p_e = smooth(hist_e / n, float(h_e))
+    A_l = kernel_matrix(float(h_l), joint.shape[0])
+    A_e = kernel_matrix(float(h_e), joint.shape[1])
+    p_le = A_l @ (joint / n) @ A_e.T
+    p_l = A_l @ (hist_l / n)
+    p_e = A_e @ (hist_e / n)
     return entropy(p_l) + entropy(p_e) - entropy(p_le)
-
-
-def smooth(a: np.ndarray, h: float, axis: int = -1) -> np.ndarray:
-    """``a`` smoothed along ``axis`` by the Gaussian of :func:`kernel_matrix` (width ``h`` bins),
-    as a separable filter: identical to the matrix product to rounding, 15x cheaper on 256x256."""
-    if h <= 0:
-        return a
-    return gaussian_filter1d(a, h, axis=axis, mode="reflect", truncate=TRUNCATE)
 
 
 def joint_histogram(l_bins: np.ndarray, e_bins: np.ndarray, n_bins: int = N_BINS) -> np.ndarray:
