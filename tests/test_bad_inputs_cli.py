@@ -659,12 +659,12 @@ def test_non_loopback_host_prints_a_warning_with_the_real_url(tmp: Path, monkeyp
         url = "http://127.0.0.1:8123"
         server = type("S", (), {"get_port": staticmethod(lambda: 8123)})()
 
-    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready, **kw: on_ready(FakeApp()))
     assert main(["--host", "0.0.0.0", "--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
     err = capsys.readouterr().err
     assert "warning: --host 0.0.0.0 exposes the workbench" in err and ":8123" in err and str(tmp / "o") in err
     assert f"http://{_outbound()}:8123 can use it" in err  # the address other machines reach, not 127.0.0.1
-    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready: on_ready(FakeApp()))
+    monkeypatch.setattr(server_module, "serve", lambda scene_set, host, port, out_dir, on_ready, **kw: on_ready(FakeApp()))
     assert main(["--port", "8123", "--scenes", str(tmp / "scenes"), "--out", str(tmp / "o")]) == 0
     assert "warning" not in capsys.readouterr().err
 
