@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -28,31 +28,42 @@ class CliRun:
         return [ln for ln in self.stderr.splitlines() if ln.strip()]
 
 
+#: A small launcher between pytest and the CLI. A child forked straight from pytest counts the
+#: test process's pages in its peak RSS (Linux records the old address space's high-water mark
+#: at exec), so the number grew with whatever ran before; forked from this launcher, the CLI's
+#: peak is its own (plus the launcher's few MB). The launcher caps the address space, runs the
+#: CLI, and reports its peak RSS (kB) as the last line of its own stdout.
+LAUNCHER = """
+import os, resource, sys
+cap = int(sys.argv[1])
+pid = os.fork()
+if pid == 0:
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    os.execv(sys.executable, [sys.executable, "-m", "l2e_studio", *sys.argv[2:]])
+_, status, usage = os.wait4(pid, 0)
+sys.stdout.flush()
+os.write(1, f"\\n@@peak_rss_kb {usage.ru_maxrss}\\n".encode())
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
 def run_cli(*args, cwd: Path | None = None, timeout: float = 120, stdin: str | None = None) -> CliRun:
-    """``python -m l2e_studio ARGS`` in a child with capped address space; peak RSS from ``wait4``."""
-
-    def limit() -> None:
-        resource.setrlimit(resource.RLIMIT_AS, (CHILD_ADDRESS_SPACE, CHILD_ADDRESS_SPACE))
-
+    """``python -m l2e_studio ARGS`` with capped address space; its own peak RSS (see LAUNCHER)."""
     env = {**os.environ, "COLUMNS": "200", "PYTHONUNBUFFERED": "1"}
-    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "l2e_studio", *map(str, args)], stdout=out, stderr=err,
-                                stdin=subprocess.DEVNULL, cwd=cwd, env=env, preexec_fn=limit)
-        deadline = t0 + timeout
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            if time.perf_counter() > deadline:
-                proc.kill()
-                _, status, usage = os.wait4(proc.pid, 0)
-                raise TimeoutError(f"l2e-studio {' '.join(map(str, args))} ran past {timeout} s")
-            time.sleep(0.02)
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        out.seek(0)
-        err.seek(0)
-        return CliRun(proc.returncode, out.read(), err.read(), usage.ru_maxrss / 1024, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", LAUNCHER, str(CHILD_ADDRESS_SPACE), *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+                            cwd=cwd, env=env, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)  # the launcher and the CLI under it
+        proc.communicate()
+        raise TimeoutError(f"l2e-studio {' '.join(map(str, args))} ran past {timeout} s") from None
+    stdout, _, tail = out.rpartition("\n@@peak_rss_kb ")
+    if not tail:
+        raise RuntimeError(f"the launcher reported no peak RSS: {err[-500:]}")
+    return CliRun(proc.returncode, stdout, err, int(tail.split()[0]) / 1024, time.perf_counter() - t0)
 
 
 def assert_one_line_error(run: CliRun, *fragments: str) -> str:

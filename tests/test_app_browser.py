@@ -183,15 +183,22 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
 
     open_tab(page, "Result")
     page.get_by_text(f"{r.score_result:.4f}").first.wait_for()
+    # the verdict, in words, beside the result
+    v = snap.verdict
+    assert v is not None
+    page.get_by_text(f"Verdict: {v.summary()}").first.wait_for()
+    handed = v.extrinsic  # what the verdict hands back is what the file holds
     page.get_by_role("button", name="Save result").click()
     page.get_by_text("Result saved").first.wait_for()
     saved = sorted((app.out_dir).glob("l2e_result_*.yaml"))
     assert len(saved) == 1
     doc = yaml.safe_load(saved[0].read_text())
-    assert np.allclose(doc["T_cam_lidar"], r.extrinsic.matrix, atol=1e-9)
+    assert np.allclose(doc["T_cam_lidar"], handed.matrix, atol=1e-9)
+    assert np.allclose(doc["optimiser_result"]["T_cam_lidar"], r.extrinsic.matrix, atol=1e-9)
+    assert doc["verdict"]["status"] == v.status
     assert doc["score"]["result"] == pytest.approx(r.score_result)
     assert doc["scenes"] == list(app.state.scene_names)
-    assert np.allclose(load_seed(saved[0]).params, r.extrinsic.params, atol=1e-8)
+    assert np.allclose(load_seed(saved[0]).params, handed.params, atol=1e-8)
     png = cv2.imread(str(saved[0].with_name(saved[0].stem + "_before_after.png")))
     assert png is not None and png.shape == (app.camera.height, 2 * app.camera.width, 3)
     # saving again never replaces the first file
@@ -206,8 +213,9 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
     screenshot(page, "04_before_after")
 
     open_tab(page, "Result")
-    page.get_by_role("button", name="Accept as seed").click()
-    wait_for(lambda: np.allclose(app.state.snapshot().extrinsic.params, r.extrinsic.params), what="accepted result")
+    page.get_by_role("button", name=app.results.accept.label).click()
+    accepted = v.extrinsic if v.trusted else r.extrinsic
+    wait_for(lambda: np.allclose(app.state.snapshot().extrinsic.params, accepted.params), what="accepted result")
 
 
 def test_cancel_stops_a_run_within_a_second(page, app):

@@ -101,7 +101,7 @@ def test_busy_port_moves_to_a_free_one_and_says_so(tmp_path, capsys, monkeypatch
     real_serve = server_module.serve
     seen = {}
 
-    def serve_until_ready(scene_set, host, port, out_dir, on_ready):
+    def serve_until_ready(scene_set, host, port, out_dir, on_ready, **kw):
         stop = threading.Event()
 
         def ready(app):
@@ -109,7 +109,7 @@ def test_busy_port_moves_to_a_free_one_and_says_so(tmp_path, capsys, monkeypatch
             on_ready(app)
             stop.set()
 
-        real_serve(scene_set, host, port, out_dir, on_ready=ready, stop=stop)
+        real_serve(scene_set, host, port, out_dir, on_ready=ready, stop=stop, **kw)
 
     monkeypatch.setattr(server_module, "serve", serve_until_ready)
     scenes = write_small_scenes(tmp_path / "scenes", n_scenes=1)

@@ -235,6 +235,10 @@ class App:
         self.overlay.show_caption(snap, reading)
 
     # --- the optimisation -----------------------------------------------------------------------
+    def run_settings(self) -> CalibrationSettings:
+        """The optimiser settings the Optimise tab holds now (raises ValueError when refused)."""
+        return self.optimise.settings()
+
     def start_run(self, settings: CalibrationSettings) -> int:
         """Start an optimisation of the included scenes from the current extrinsic."""
         run_id = self.state.begin_run()

@@ -20,11 +20,11 @@ from ...qa.heldout import Candidate, score
 from ...qa.studies import StackSource, check_study_args, repeatability_specs, study
 
 if TYPE_CHECKING:
-    from ..server import App
+    from ..context import Workbench
 
 
 class QAPanel:
-    def __init__(self, app: "App") -> None:
+    def __init__(self, app: "Workbench") -> None:
         self.app = app
         gui = app.server.gui
         self._cancel: threading.Event | None = None
@@ -61,7 +61,7 @@ class QAPanel:
     # --- held-out table ----------------------------------------------------------------------------
     def _settings(self) -> CalibrationSettings:
         try:
-            return self.app.optimise.settings()
+            return self.app.run_settings()
         except Exception:
             return CalibrationSettings()
 
