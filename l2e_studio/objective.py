@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from .camera import CameraModel
 from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
 from .scoring import OBJECTIVES
-from .scoring import edges as edge_score
+from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
@@ -245,7 +245,7 @@ class SceneStack:
         ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int64) + 1
         vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int64) + 1
         e = self.maps.reshape(-1)[(self.scene_of * Hp + vi) * Wp + ui].astype(np.float64)
-        contrib = self.weights * (e - edge_score.OFFSET) / edge_score.SCALE
+        contrib = self.weights * (e - edges.OFFSET) / edges.SCALE
         num = np.bincount(self.scene_of, weights=contrib, minlength=S)
         den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
         mask = np.ones(S, dtype=bool) if pooled is None else np.asarray(pooled, dtype=bool)
@@ -390,16 +390,16 @@ class EdgeObjective(MapObjective):
         if stack.weights is None:
             raise ValueError("the edges objective needs a stack built for it")
         total = float(stack.weights.sum())
-        self._w = (stack.weights / (edge_score.SCALE * max(total, 1e-12))).astype(np.float32)
+        self._w = (stack.weights / (edges.SCALE * max(total, 1e-12))).astype(np.float32)
 
     def value(self, delta: np.ndarray) -> float:
         e, _ = self._sample(np.asarray(delta, dtype=np.float64), jacobian=False)
-        return float(self._w @ (e - np.float32(edge_score.OFFSET)))
+        return float(self._w @ (e - np.float32(edges.OFFSET)))
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
         delta = np.asarray(delta, dtype=np.float64)
         e, de_ddelta = self._sample(delta, jacobian=True)
-        return float(self._w @ (e - np.float32(edge_score.OFFSET))), self._chain(de_ddelta, self._w, delta)
+        return float(self._w @ (e - np.float32(edges.OFFSET))), self._chain(de_ddelta, self._w, delta)
 
 
 class MIObjective(MapObjective):
@@ -555,9 +555,9 @@ def _stack_maps(
     out_w, out_h = size or (w, h)
     factor = out_w / w
     if objective == "edges":
-        out = np.full((len(raw), out_h + 2, out_w + 2), edge_score.OFFSET, dtype=np.float32)
+        out = np.full((len(raw), out_h + 2, out_w + 2), edges.OFFSET, dtype=np.float32)
         for i, m in enumerate(raw):
-            out[i, 1:-1, 1:-1] = edge_score.edge_map(m, sigma * factor, (out_w, out_h))
+            out[i, 1:-1, 1:-1] = edges.edge_map(m, sigma * factor, (out_w, out_h))
         return out
     out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
     for i, (m, kind) in enumerate(zip(raw, kinds)):

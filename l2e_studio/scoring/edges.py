@@ -91,14 +91,6 @@ def edge_map(image: np.ndarray, sigma: float, size: tuple[int, int] | None = Non
     return (OFFSET + SCALE * np.clip(m, -1.0, 1.0)).astype(np.float32)
 
 
-def edge_score(values: np.ndarray, weights: np.ndarray) -> float:
-    """The weighted mean band-passed edge value (-1..1) of points that read ``values`` (0..255)."""
-    total = float(weights.sum())
-    if total <= 0:
-        return 0.0
-    return float(weights @ (np.asarray(values, dtype=np.float64) - OFFSET)) / (SCALE * total)
-
-
 def canny_distance(image: np.ndarray) -> np.ndarray:
     """Distance (px) from each pixel to the nearest Canny edge of the image (thresholds from the
     gradient's own percentiles, so they follow the image's contrast)."""
