@@ -1,4 +1,5 @@
-"""Bounded MI maximisation over one or many scenes, coarse to fine.
+"""Bounded maximisation of a scene score (the paper's MI, or the edge score) over one or many
+scenes, coarse to fine.
 
 :func:`calibrate` is blocking and GUI-free: run it in a worker thread, follow it through
 ``on_progress`` (called from that thread after every objective evaluation) and stop it from any
@@ -202,7 +203,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         cancelled=cancelled,
         history=history,
         message=message,
-        stages=settings.schedule(stack.camera.width, stack.camera.height),
+        stages=run.stages,
         objective=stack.objective_name,
     )
 
@@ -224,7 +225,7 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
     free = np.array([not settings.rotation_only] * 3 + [True] * 3)
     if settings.translation_bound == 0:
         free[:3] = False
-    run = _Run(stack, seed, settings, scale, free, len(stages), on_progress, cancel, t0)
+    run = _Run(stack, seed, settings, scale, free, stages, on_progress, cancel, t0)
     if _global_search(settings, stack) and len(stages) > 1:
         # several starts climb every stage, and the seed also skips the coarsest (its blur can
         # hold side peaks that a seed already in the fine basin should not be dragged to); the
@@ -269,9 +270,9 @@ class _Run:
     """One calibration's climbs: evaluation count, history, progress and cancel across stages
     and starts."""
 
-    def __init__(self, stack, seed, settings, scale, free, n_stages, on_progress, cancel, t0) -> None:
+    def __init__(self, stack, seed, settings, scale, free, stages, on_progress, cancel, t0) -> None:
         self.stack, self.seed, self.settings = stack, seed, settings
-        self.scale, self.free, self.n_stages = scale, free, n_stages
+        self.scale, self.free, self.stages, self.n_stages = scale, free, tuple(stages), len(stages)
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count = 0
         self.history: list[tuple[int, float, int]] = []
