@@ -30,6 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from .camera import CameraModel
 from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
+from .pixel_index import count_pairs, pixel_index
 from .scoring import OBJECTIVES
 from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
@@ -186,31 +187,36 @@ class SceneStack:
                                extrinsic.translation.astype(np.float32), self.camera)
 
     def joint_histograms(self, extrinsic: Extrinsic, per_scene: bool = True) -> np.ndarray:
-        """(S, 256, 256) joint (L, E) counts per scene, nearest-pixel lookup, in-image points;
-        with ``per_scene=False`` the (1, 256, 256) counts of all scenes pooled."""
+        """(S, 256, 256) int32 joint (L, E) counts per scene, nearest-pixel lookup, in-image
+        points; with ``per_scene=False`` the (1, 256, 256) counts of all scenes pooled."""
+        joints = self._scene_joints(extrinsic)
+        if not per_scene:
+            joints = joints.sum(axis=0, dtype=np.int32, keepdims=True)
+        return joints.reshape(-1, N_BINS, N_BINS)
+
+    def _scene_joints(
+        self, extrinsic: Extrinsic, then: Callable[[int, np.ndarray], None] | None = None
+    ) -> np.ndarray:
+        """(S, 65536) int32 joint counts, one scene per task on the worker threads; ``then(s,
+        counts)`` runs in the same task once scene ``s`` is counted (e.g. its MI)."""
         R = extrinsic.R.astype(np.float32)
         t = extrinsic.translation.astype(np.float32)
-        flat = np.empty(self.n_points, dtype=np.int32)
-        _run_chunks(lambda a, b: self._joint_index_chunk(R, t, a, b, flat, per_scene), self.n_points)
-        S = self.n_scenes if per_scene else 1
-        size = S * N_BINS * N_BINS
-        counts = np.bincount(flat, minlength=size + 1)[:size]  # the last bin holds points off the image
-        return counts.reshape(S, N_BINS, N_BINS).astype(np.float64)
+        e_bins = _e_bins(self.maps)
+        starts = np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
+        joints = np.zeros((self.n_scenes, N_BINS * N_BINS), np.int32)
 
-    def _joint_index_chunk(self, R, t, a, b, out, per_scene: bool) -> None:
-        """Flat ([scene,] L, E) histogram index of points a..b; off-image points get the spill bin."""
-        S, Hp, Wp = self.maps.shape
-        uv, inside = _project_inside(self.points[:, a:b], R, t, self.camera)
-        ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int32) + 1
-        vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int32) + 1
-        scene = self.scene_of[a:b]
-        e = self.maps.reshape(-1).take((scene * Hp + vi) * Wp + ui)
-        e_bins = np.minimum(np.rint(e), N_BINS - 1).astype(np.int32)
-        if per_scene:
-            idx = (scene * N_BINS + self.l_bins[a:b]) * N_BINS + e_bins
-            out[a:b] = np.where(inside, idx, S * N_BINS * N_BINS)
-        else:
-            out[a:b] = np.where(inside, self.l_bins[a:b] * N_BINS + e_bins, N_BINS * N_BINS)
+        def scene(s: int) -> None:
+            a, b = int(starts[s]), int(starts[s + 1])
+            pix = np.empty(min(CHUNK, b - a), np.int32)
+            for c in range(a, b, CHUNK):
+                d = min(c + CHUNK, b)
+                index = pixel_index(self.points[:, c:d], R, t, self.camera, MIN_DEPTH, pix)
+                count_pairs(index, self.l_bins[c:d], e_bins[s], joints[s])
+            if then is not None:
+                then(s, joints[s])
+
+        _run_tasks(scene, range(self.n_scenes))
+        return joints
 
     def mi(
         self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
@@ -218,19 +224,21 @@ class SceneStack:
         """The paper's MI at ``extrinsic``: (the scenes pooled, per scene; NaN without ``per_scene``).
 
         ``pooled`` (a boolean mask over the scenes) picks the scenes whose histograms are summed
-        for the first value; by default all. NaN when the mask picks none.
+        for the first value; by default all. NaN when the mask picks none. Each scene's value is computed in the task that counts
+        its points.
         """
-        with single_threaded_blas():
-            split = per_scene or pooled is not None
-            joints = self.joint_histograms(extrinsic, per_scene=split)
-            if pooled is None:
-                total = mi_from_joint_histogram(joints.sum(axis=0))
-            else:
-                mask = np.asarray(pooled, dtype=bool)
-                total = mi_from_joint_histogram(joints[mask].sum(axis=0)) if mask.any() else float("nan")
-            if not per_scene:
-                return total, np.full(self.n_scenes, np.nan)
-            return total, np.array([mi_from_joint_histogram(j) for j in joints])
+        per = np.full(self.n_scenes, np.nan)
+
+        def scene_mi(s: int, counts: np.ndarray) -> None:
+            per[s] = mi_from_joint_histogram(counts.reshape(N_BINS, N_BINS))
+
+        joints = self._scene_joints(extrinsic, scene_mi if per_scene else None)
+        mask = np.ones(self.n_scenes, bool) if pooled is None else np.asarray(pooled, dtype=bool)
+        total = float("nan")
+        if mask.any():
+            pooled_counts = joints.sum(axis=0) if mask.all() else joints[mask].sum(axis=0)
+            total = mi_from_joint_histogram(pooled_counts.reshape(N_BINS, N_BINS))
+        return total, per
 
     # --- the stack's own score (what the optimiser climbs, in its reporting form) -------------
     def edge_scores(
@@ -481,34 +489,53 @@ def _run_chunks(work: Callable[[int, int], None], n: int) -> None:
     Each call writes its own slice of the output arrays, so the chunks need no locking; numpy
     releases the GIL inside its loops, so two cores really work at once.
     """
-    spans = [(a, min(a + CHUNK, n)) for a in range(0, n, CHUNK)]
-    if WORKERS > 1 and len(spans) > 1:
-        for f in [_pool().submit(work, a, b) for a, b in spans]:
+    _run_tasks(lambda ab: work(*ab), [(a, min(a + CHUNK, n)) for a in range(0, n, CHUNK)])
+
+
+def _run_tasks(work: Callable, items: Sequence) -> None:
+    """Call ``work(item)`` for every item, on the worker threads when there are several."""
+    items = list(items)
+    if WORKERS > 1 and len(items) > 1:
+        for f in [_pool().submit(work, item) for item in items]:
             f.result()
     else:
-        for a, b in spans:
-            work(a, b)
+        for item in items:
+            work(item)
+
+
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
-#: The last few packed maps, keyed by the maps array they came from: stacks made by ``select``
+#: Arrays derived from a maps stack, keyed by (the maps array, what): stacks made by ``select``
 #: share their maps, so the objectives of a verdict's half-scene refinements (and of a stage
 #: revisited from another start) reuse one packing instead of rewriting ~300 MB each time.
-_PACKED: list[tuple[weakref.ref, np.ndarray]] = []
-_PACKED_KEEP = 2
-_PACKED_LOCK = threading.Lock()
+_DERIVED: list[tuple[weakref.ref, str, np.ndarray]] = []
+_DERIVED_KEEP = 4
+_DERIVED_LOCK = threading.Lock()
+
+
+def _derived(maps: np.ndarray, what: str, build: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``build(maps)``, cached while ``maps`` lives (maps are never written after stacking)."""
+    with _DERIVED_LOCK:
+        for ref, name, value in _DERIVED:
+            if ref() is maps and name == what:
+                return value
+    value = build(maps)
+    with _DERIVED_LOCK:
+        live = [d for d in _DERIVED if d[0]() is not None]
+        _DERIVED[:] = live[-(_DERIVED_KEEP - 1):] + [(weakref.ref(maps), what, value)]
+    return value
 
 
 def _packed(maps: np.ndarray) -> np.ndarray:
-    """:func:`_pack_quads` of ``maps``, cached while ``maps`` lives (maps are never written after stacking)."""
-    with _PACKED_LOCK:
-        for ref, quads in _PACKED:
-            if ref() is maps:
-                return quads
-    quads = _pack_quads(maps)
-    with _PACKED_LOCK:
-        _PACKED[:] = [(r, q) for r, q in _PACKED if r() is not None][-(_PACKED_KEEP - 1):] + [(weakref.ref(maps), quads)]
-    return quads
+    """:func:`_pack_quads` of ``maps`` (cached)."""
+    return _derived(maps, "packed", _pack_quads)
+
+
+def _e_bins(maps: np.ndarray) -> np.ndarray:
+    """(S, H*W) uint8: each map pixel's E bin for the paper's MI (nearest bin; cached)."""
+    return _derived(maps, "e_bins", lambda m: np.clip(np.rint(m[:, 1:-1, 1:-1]), 0, N_BINS - 1)
+                    .astype(np.uint8).reshape(m.shape[0], -1))
 
 
 def _pack_quads(maps: np.ndarray) -> np.ndarray:
