@@ -53,6 +53,12 @@ class Scene:
     map_path: Path | None = None
     accumulation: Accumulation | None = None  # how the map was built from raw events; None: read as an image
 
+    def map_record(self) -> dict:
+        """How this scene's map was made, as result files record it (``accumulation`` is None
+        for a map read as an image)."""
+        return {"file": None if self.map_path is None else str(self.map_path), "kind": self.map_kind,
+                "accumulation": None if self.accumulation is None else self.accumulation.to_dict()}
+
 
 @dataclass
 class SceneFailure:
