@@ -35,7 +35,7 @@ class RebuildSummary:
     def line(self) -> str:
         """One line for the status ("✓ ..." or "✗ ..." with the first error)."""
         done = (f"✓ Rebuilt the map of {', '.join(self.rebuilt) if len(self.rebuilt) <= 3 else f'{len(self.rebuilt)} scenes'}"
-                f" ({self.settings.describe()}) in {self.seconds:.1f} s") if self.rebuilt else ""
+                f" ({self.settings.describe()}) in {self.seconds:.2f} s") if self.rebuilt else ""
         if not self.errors:
             return done
         failed = f"✗ {self.errors[0]}" + (f" (and {len(self.errors) - 1} more)" if len(self.errors) > 1 else "")
@@ -63,25 +63,27 @@ class MapRebuilder:
         self._on_status, self._on_rebuilt, self._on_finished = on_status, on_rebuilt, on_finished
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
+        self._busy = False  # cleared before ``on_finished``: its callback sees the rebuilder idle
 
     def busy(self) -> bool:
-        t = self._thread
-        return t is not None and t.is_alive()
+        return self._busy
 
     def start(self, jobs: Sequence[tuple[int, Scene]], settings: Accumulation) -> None:
         """Rebuild each ``(index, scene)`` of ``jobs`` with ``settings``; RuntimeError when busy."""
         with self._lock:
-            if self.busy():
+            if self._busy:
                 raise RuntimeError("a rebuild is in progress; wait for it to finish")
+            self._busy = True
             self._thread = threading.Thread(target=self._work, args=(list(jobs), settings),
                                             name="l2e-rebuild-maps", daemon=True)
             self._thread.start()
 
     def wait(self, timeout: float = 60.0) -> bool:
+        """Block until the current request has finished, its report included."""
         t = self._thread
         if t is not None:
             t.join(timeout)
-        return not self.busy()
+        return t is None or not t.is_alive()
 
     def _work(self, jobs: list[tuple[int, Scene]], settings: Accumulation) -> None:
         t0 = time.perf_counter()
@@ -91,13 +93,16 @@ class MapRebuilder:
             self._safe(self._on_status, f"Rebuilding map of {scene.name}{count}...")
             try:
                 new = reaccumulate(scene, settings, self.width, self.height)
-            except (InputError, ValueError, OSError, MemoryError) as exc:
+            except Exception as exc:  # reported in the summary; the scene keeps its old map
+                if not isinstance(exc, (InputError, ValueError, OSError)):
+                    log.exception("rebuilding the map of %s failed", scene.name)
                 errors.append(f"{scene.name}: {one_line(exc)}")
                 continue
             if self._safe(self._on_rebuilt, index, new):
                 rebuilt.append(scene.name)
             else:
                 errors.append(f"{scene.name}: the new map could not be shown (see the log)")
+        self._busy = False
         self._safe(self._on_finished, RebuildSummary(settings, tuple(rebuilt), tuple(errors), time.perf_counter() - t0))
 
     @staticmethod
