@@ -16,7 +16,7 @@ import yaml
 from app_fixtures import free_port, screenshot, wait_for, write_event_recordings, write_small_scenes
 from l2e_studio.calibrate import CalibrationSettings
 from l2e_studio.io.events import Accumulation
-from test_app_browser import browser, context, open_tab, overlay_digest, page  # noqa: F401
+from test_app_browser import browser, context, overlay_digest, page  # noqa: F401 (fixtures)
 from test_app_browser_precision import text_field
 
 
