@@ -3,8 +3,9 @@
 A result file holds ``T_cam_lidar`` (4x4, maps lidar-frame points into the camera frame), its
 inverse ``T_lidar_cam``, the same transform as translation / rotation vector / quaternion (xyzw) /
 roll-pitch-yaw, the seed, the bounds and optimiser settings, the MI at the seed and at the result
-(all scenes pooled and per scene), the evaluation count, the optimisation wall time and the scene
-list. :func:`l2e_studio.io.cameras.load_seed` reads it back as a seed.
+(all scenes pooled and per scene), the evaluation count, the optimisation wall time, the scene
+list and, per scene, the map it was scored on (``maps``: file, kind, and the accumulation
+window / start / hot-pixel sigma of maps built from raw events). :func:`l2e_studio.io.cameras.load_seed` reads it back as a seed.
 """
 
 from __future__ import annotations
@@ -43,8 +44,10 @@ def result_to_dict(
     scenes_dir: str | Path | None = None,
     quality: dict | None = None,
     verdict: Verdict | None = None,
+    maps: dict[str, dict] | None = None,
 ) -> dict:
-    """The result file's content as plain Python types (``quality``: an assessment, if run).
+    """The result file's content as plain Python types (``quality``: an assessment, if run;
+    ``maps``: scene name -> how its map was made, see :meth:`l2e_studio.scenes.Scene.map_record`).
 
     With a ``verdict``, the calibration written at the top is the one the verdict hands back
     (the seed, when the result was not trusted); the optimiser's own answer stays on record
@@ -87,6 +90,8 @@ def result_to_dict(
     if verdict is not None:
         out["verdict"] = verdict.to_dict()
         out["optimiser_result"] = extrinsic_to_dict(result.extrinsic)
+    if maps is not None:
+        out["maps"] = dict(maps)
     if scenes_dir is not None:
         out["scenes_dir"] = str(scenes_dir)
     if quality is not None:
@@ -116,11 +121,13 @@ def write_result(
     scenes_dir: str | Path | None = None,
     quality: dict | None = None,
     verdict: Verdict | None = None,
+    maps: dict[str, dict] | None = None,
 ) -> tuple[Path, Path | None]:
     """Write the result file atomically. Returns ``(path, backup)``: an existing file at
     ``path`` is first kept under a timestamped backup name, never overwritten."""
     path = Path(path)
-    return path, atomic_write_bytes(path, result_bytes(path, result, camera, scenes_dir, quality, verdict), keep_existing=True)
+    data = result_bytes(path, result, camera, scenes_dir, quality, verdict, maps)
+    return path, atomic_write_bytes(path, data, keep_existing=True)
 
 
 def result_bytes(
@@ -130,9 +137,10 @@ def result_bytes(
     scenes_dir: str | Path | None = None,
     quality: dict | None = None,
     verdict: Verdict | None = None,
+    maps: dict[str, dict] | None = None,
 ) -> bytes:
     """The result file's bytes, in the format ``path``'s name asks for."""
-    return dumps(result_to_dict(result, camera, scenes_dir, quality, verdict), path)
+    return dumps(result_to_dict(result, camera, scenes_dir, quality, verdict, maps), path)
 
 
 def _round(a) -> list:

@@ -133,6 +133,21 @@ class SceneStack:
         maps = _stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name)
         return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
 
+    def with_map(self, index: int, raw_map: np.ndarray) -> "SceneStack":
+        """The same stack with scene ``index``'s map replaced by ``raw_map`` (unprepared, full
+        resolution); only that map is prepared again, the others are shared, not recomputed."""
+        if not 0 <= index < self.n_scenes:
+            raise IndexError(f"scene index {index} is outside 0..{self.n_scenes - 1}")
+        raw = np.asarray(raw_map, dtype=np.float32)
+        if raw.shape != self.raw_maps[index].shape:
+            raise ValueError(f"scene {self.names[index]}: the new map is {raw.shape[1]}x{raw.shape[0]}, "
+                             f"the stack's are {self.raw_maps[index].shape[1]}x{self.raw_maps[index].shape[0]}")
+        size = (self.camera.width, self.camera.height)
+        maps = self.maps.copy()  # the old stack stays valid for whoever holds it (immutable)
+        maps[index] = _stack_maps([raw], [self.map_kinds[index]], self.sigma, size, self.objective_name)[0]
+        raw_maps = self.raw_maps[:index] + (raw,) + self.raw_maps[index + 1:]
+        return replace(self, maps=maps, raw_maps=raw_maps)
+
     def select(self, mask: np.ndarray) -> "SceneStack":
         """Keep the points where ``mask`` is true (the maps are shared, not copied)."""
         mask = np.asarray(mask, dtype=bool)

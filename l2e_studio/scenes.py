@@ -18,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -30,9 +30,9 @@ from .camera import CameraModel
 from .errors import InputError
 from .geometry import Extrinsic
 from .io.cameras import load_rig, load_seed
-from .io.events import EVENT_SUFFIXES
+from .io.events import EVENT_SUFFIXES, Accumulation, accumulate_with
 from .io.lidar import LIDAR_SUFFIXES, load_lidar
-from .io.maps import MAP_SUFFIXES, guess_kind, load_map
+from .io.maps import MAP_SUFFIXES, guess_kind, is_event_recording, load_map
 
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
@@ -51,6 +51,13 @@ class Scene:
     map_kind: str = "events"  # "events" | "image"
     lidar_path: Path | None = None
     map_path: Path | None = None
+    accumulation: Accumulation | None = None  # how the map was built from raw events; None: read as an image
+
+    def map_record(self) -> dict:
+        """How this scene's map was made, as result files record it (``accumulation`` is None
+        for a map read as an image)."""
+        return {"file": None if self.map_path is None else str(self.map_path), "kind": self.map_kind,
+                "accumulation": None if self.accumulation is None else self.accumulation.to_dict()}
 
 
 @dataclass
@@ -164,10 +171,24 @@ def load_scene(
     """Read one scene; checks the map size against ``camera`` when it is known. ``map_kind``
     ("events" or "image") overrides the kind found from the file and its content."""
     w, h = (camera.width, camera.height) if camera else (None, None)
-    event_map, kind = load_map(map_path, width=w, height=h, kind=map_kind)
+    acc = Accumulation() if is_event_recording(map_path) else None
+    settings = acc or Accumulation()
+    event_map, kind = load_map(map_path, width=w, height=h, kind=map_kind, window_s=settings.window_s,
+                               start_s=settings.start_s, hot_pixel_sigma=settings.hot_pixel_sigma)
     points, intensity = _load_scan_cached(lidar_path, cache_root)
     check_informative(map_path, event_map, lidar_path, intensity)
-    return Scene(name, points, intensity, event_map, kind, lidar_path, map_path)
+    return Scene(name, points, intensity, event_map, kind, lidar_path, map_path, acc)
+
+
+def reaccumulate(scene: Scene, settings: Accumulation, width: int, height: int) -> Scene:
+    """``scene`` with its map accumulated again from its raw events per ``settings`` (cached like
+    at load time); :class:`InputError` when the result cannot be used (e.g. an empty or constant
+    window). A scene whose map is not a raw event recording is refused with ValueError."""
+    if scene.accumulation is None or scene.map_path is None:
+        raise ValueError(f"scene {scene.name}: its map is not a raw event recording")
+    event_map = accumulate_with(scene.map_path, settings, width, height)
+    check_informative(scene.map_path, event_map, scene.lidar_path or scene.map_path, scene.intensity)
+    return replace(scene, event_map=np.ascontiguousarray(event_map, dtype=np.float32), accumulation=settings)
 
 
 def check_informative(map_path: Path, event_map: np.ndarray, lidar_path: Path, intensity: np.ndarray) -> None:

@@ -28,6 +28,33 @@ def write_small_scenes(folder: Path, **changes) -> Path:
     return write_dataset(folder, SynthConfig(**{**SMALL, **changes}))
 
 
+def write_event_recordings(folder: Path, duration_s: float = 4.0, share: float = 0.25, seed: int = 5) -> list[Path]:
+    """Replace each ``event/*.png`` of a scene folder with a raw recording (``.npz``: x, y, t in
+    us, p) whose events over ``duration_s`` add up to ``share`` of the map's counts, plus a
+    little uniform noise and a few hot pixels that fire all the time. Returns the recordings."""
+    import cv2
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for png in sorted((folder / "event").glob("*.png")):
+        counts = np.rint(cv2.imread(str(png), cv2.IMREAD_UNCHANGED).astype(np.float64) * share).astype(np.int64)
+        h, w = counts.shape
+        ys, xs = np.divmod(np.repeat(np.arange(h * w), counts.ravel()), w)
+        n_noise, hot = int(0.05 * h * w * duration_s), rng.integers(0, [w, h], size=(4, 2))
+        n_hot = int(400 * duration_s)
+        xs = np.concatenate([xs, rng.integers(0, w, n_noise), np.repeat(hot[:, 0], n_hot)])
+        ys = np.concatenate([ys, rng.integers(0, h, n_noise), np.repeat(hot[:, 1], n_hot)])
+        t = rng.integers(0, int(duration_s * 1e6), xs.size)
+        order = np.argsort(t, kind="stable")
+        path = png.with_suffix(".npz")
+        np.savez(path, x=xs[order].astype(np.uint16), y=ys[order].astype(np.uint16), t=t[order].astype(np.int64),
+                 p=rng.integers(0, 2, xs.size).astype(np.uint8))
+        png.unlink()
+        out.append(path)
+    return out
+
+
 def wait_for(condition: Callable[[], object], timeout: float = 20.0, interval: float = 0.02, what: str = "") -> object:
     """Poll ``condition`` until it returns something truthy; fail the test on timeout."""
     deadline = time.monotonic() + timeout

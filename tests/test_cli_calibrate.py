@@ -63,6 +63,10 @@ def test_seed_override_and_single_stage(small_synth_dir, tmp_path):
     data = yaml.safe_load(out.read_text())
     assert np.allclose(data["seed"]["T_cam_lidar"], off.matrix, atol=1e-8)
     assert len(data["optimiser"]["stages"]) == 1
+    # each scene's map is on record: PNG maps are read as they are (no accumulation)
+    assert set(data["maps"]) == set(data["scenes"])
+    assert data["maps"]["scene_000"] == {"file": str(small_synth_dir / "event" / "scene_000.png"), "kind": "events",
+                                         "accumulation": None}
 
 
 def test_missing_folder(tmp_path):

@@ -117,3 +117,50 @@ def test_pooled_mask_and_subset_agree_with_a_stack_of_those_scenes(small_synth):
     assert sub.names == ("scene_000", "scene_002") and sub.maps.shape[0] == 2
     assert sub.mi(truth)[0] == pytest.approx(total, rel=1e-12)
     assert np.isnan(stack.mi(truth, pooled=np.zeros(len(scenes), bool))[0])
+
+
+@pytest.mark.parametrize("objective", ["mi", "edges"])
+def test_with_map_replaces_one_scene_and_leaves_the_others_and_the_old_stack(small_synth, objective, monkeypatch):
+    import dataclasses
+
+    import l2e_studio.objective as engine
+
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=3.0, objective=objective)
+    before_maps = stack.maps.copy()
+    _, per_before = stack.score(truth)
+    new = np.ascontiguousarray(np.flipud(scenes[1].event_map))  # the same counts, in the wrong place
+    prepared = []
+    real = engine._stack_maps
+    monkeypatch.setattr(engine, "_stack_maps", lambda raw, *a, **k: prepared.append(len(raw)) or real(raw, *a, **k))
+    swapped = stack.with_map(1, new)
+    assert prepared == [1]  # only the new map was prepared again
+    _, per_after = swapped.score(truth)
+    assert per_after[1] < 0.5 * per_before[1]  # the scene's score follows its map
+    np.testing.assert_array_equal(np.delete(per_after, 1), np.delete(per_before, 1))
+    np.testing.assert_array_equal(np.delete(swapped.maps, 1, axis=0), np.delete(before_maps, 1, axis=0))
+    np.testing.assert_array_equal(stack.maps, before_maps)  # the old stack is untouched
+    assert stack.raw_maps[1] is not swapped.raw_maps[1] and swapped.raw_maps[0] is stack.raw_maps[0]
+    # the same as stacking the changed scene from scratch
+    fresh = SceneStack.build([*scenes[:1], dataclasses.replace(scenes[1], event_map=new), *scenes[2:]], camera,
+                             sigma=3.0, objective=objective)
+    np.testing.assert_allclose(swapped.maps, fresh.maps, atol=1e-5)
+    # re-smoothing later starts from the new raw map
+    np.testing.assert_allclose(swapped.with_sigma(5.0).maps, fresh.with_sigma(5.0).maps, atol=1e-5)
+
+
+def test_with_map_refuses_a_wrong_size_or_index(small_synth):
+    scenes, camera, _ = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=3.0)
+    with pytest.raises(ValueError, match="new map is"):
+        stack.with_map(0, np.zeros((10, 10), np.float32))
+    with pytest.raises(IndexError):
+        stack.with_map(len(scenes), scenes[0].event_map)
+
+
+def test_with_map_on_a_coarse_stack_keeps_its_scale(small_synth):
+    scenes, camera, _ = small_synth
+    coarse = SceneStack.build(scenes, camera, sigma=3.0).with_sigma(6.0, scale=0.5)
+    swapped = coarse.with_map(2, scenes[0].event_map)
+    assert swapped.maps.shape == coarse.maps.shape and swapped.scale == 0.5
+    np.testing.assert_allclose(swapped.maps[2], coarse.maps[0], atol=1e-5)

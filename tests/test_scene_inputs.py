@@ -73,3 +73,32 @@ def test_extract_refuses_clouds_without_intensity(tmp_path: Path, monkeypatch) -
     with pytest.raises(InputError, match="a.bag: the point clouds have no intensity field"):
         extract_bag(bag, tmp_path / "out", ExtractSettings())
     assert not list((tmp_path / "out").rglob("*.pcd"))
+
+
+def test_scenes_from_raw_events_record_their_accumulation_and_can_be_rebuilt(tmp_path: Path, monkeypatch) -> None:
+    from app_fixtures import write_event_recordings, write_small_scenes
+    from l2e_studio.io.events import Accumulation
+    from l2e_studio.scenes import reaccumulate
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    folder = write_small_scenes(tmp_path / "scenes", n_scenes=2)
+    shutil.copy(folder / "event" / "scene_001.png", tmp_path / "keep.png")
+    write_event_recordings(folder)
+    shutil.copy(tmp_path / "keep.png", folder / "event" / "scene_001.png")  # one image map among recordings
+    (folder / "event" / "scene_001.npz").unlink()
+    ss = load_scene_folder(folder)
+    events, image = ss.scenes
+    assert events.accumulation == Accumulation() and image.accumulation is None
+    w, h = ss.camera.width, ss.camera.height
+    short = reaccumulate(events, Accumulation(window_s=0.5, start_s=1.0), w, h)
+    assert short.accumulation == Accumulation(0.5, 1.0) and events.accumulation == Accumulation()  # a new scene
+    assert short.event_map.sum() < 0.5 * events.event_map.sum() and short.points is events.points
+    hot = reaccumulate(events, Accumulation(hot_pixel_sigma=5.0), w, h)
+    assert np.count_nonzero(hot.event_map) < np.count_nonzero(events.event_map)  # the hot pixels are zeroed
+    with pytest.raises(InputError, match="no events in the window"):
+        reaccumulate(events, Accumulation(start_s=60.0), w, h)
+    with pytest.raises(ValueError, match="not a raw event recording"):
+        reaccumulate(image, Accumulation(), w, h)
+    for bad in (dict(window_s=0.0), dict(start_s=-1.0), dict(hot_pixel_sigma=0.0), dict(window_s=float("nan"))):
+        with pytest.raises(ValueError):
+            Accumulation(**bad)

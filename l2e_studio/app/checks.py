@@ -1,4 +1,4 @@
-"""Checks of what a person types into the optimiser settings (pure functions, no viser).
+"""Checks of what a person types into the optimiser and event-map settings (pure functions, no viser).
 
 Nothing is clamped: a value outside its range is refused with a sentence that says why, shown
 beside its field, and Start stays disabled until every field holds a meaningful value.
@@ -8,11 +8,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..io.events import Accumulation
 from .exact import parse_number
 
 MAX_TRANSLATION_BOUND_M = 2.0
 MAX_ROTATION_BOUND_DEG = 45.0
 MAX_SIGMA_PX = 50.0
+MAX_WINDOW_S = 3600.0  # an hour of a static scene is already far more than a map needs
+MAX_HOT_PIXEL_SIGMA = 1000.0  # as the accumulate command's --hot-pixels
+OFF_WORDS = ("", "off", "none", "no")
 
 
 @dataclass(frozen=True)
@@ -34,7 +38,8 @@ def _in_range(text: str, name: str, unit: str, low: float, high: float, low_open
     too_low = value <= low if low_open else value < low
     if too_low or value > high:
         bracket = "(" if low_open else "["
-        why = f"{name}: {text.strip()} {unit} is outside {bracket}{low:g}, {high:g}] {unit}"
+        u = f" {unit}" if unit else ""
+        why = f"{name}: {text.strip()}{u} is outside {bracket}{low:g}, {high:g}]{u}"
         return Checked(None, why + (f"; {hint}" if hint else ""))
     return Checked(value)
 
@@ -55,12 +60,69 @@ def check_sigma(text: str) -> Checked:
     return _in_range(text, "Smoothing σ", "px", 0.0, MAX_SIGMA_PX, True)
 
 
-def start_blocker(n_included: int, problems: list[str], running: bool) -> str:
+def start_blocker(n_included: int, problems: list[str], running: bool, rebuilding: bool = False) -> str:
     """Why Start cannot run now ("" when it can)."""
     if running:
         return "a run is in progress"
+    if rebuilding:
+        return "event maps are being rebuilt (Scenes tab, Event map)"
     if n_included == 0:
         return "no scene is included: tick Use in optimisation for at least one scene (Scenes tab)"
     if problems:
         return "fix the settings marked above"
     return ""
+
+
+
+@dataclass(frozen=True)
+class AccumulationChecked:
+    """The event-map fields as typed: the settings, or None with a problem per refused field."""
+
+    settings: Accumulation | None
+    problems: tuple[str, str, str]  # window, start, hot pixels ("" where fine)
+    note: str = ""  # worth knowing, not a refusal
+
+
+def check_accumulation(window: str, start: str, hot_pixels: str, duration_s: float | None) -> AccumulationChecked:
+    """Check the three event-map fields against a recording ``duration_s`` long (None: unknown)."""
+    w, s, h = check_window(window), check_start(start, duration_s), _check_hot_pixels(hot_pixels)
+    problems = (w.problem, s.problem, h.problem)
+    if not (w.ok and s.ok and h.ok):
+        return AccumulationChecked(None, problems)
+    hot = None if h.value == float("inf") else h.value
+    settings = Accumulation(window_s=float(w.value), start_s=float(s.value), hot_pixel_sigma=hot)
+    return AccumulationChecked(settings, problems, window_note(settings.start_s, settings.window_s, duration_s))
+
+
+def check_window(text: str) -> Checked:
+    """Accumulation window in seconds: (0, 3600]."""
+    return _in_range(text, "Window", "s", 0.0, MAX_WINDOW_S, True)
+
+
+def check_start(text: str, duration_s: float | None) -> Checked:
+    """Seconds into the recording: [0, duration) when the duration is known, else >= 0."""
+    value = parse_number(text)
+    if value is None:
+        return Checked(None, f"Start: “{text}” is not a number")
+    if value < 0:
+        return Checked(None, f"Start: {text.strip()} s is before the recording; it starts at 0 s")
+    if duration_s is not None and value >= duration_s:
+        return Checked(None, f"Start: {text.strip()} s is past the end of the recording ({duration_s:.3f} s long)")
+    return Checked(value)
+
+
+def _check_hot_pixels(text: str) -> Checked:
+    """Hot-pixel suppression: ``off`` (value ``inf`` here: nothing is suppressed) or a sigma in (0, 1000]."""
+    if str(text).strip().lower() in OFF_WORDS:
+        return Checked(float("inf"))
+    if parse_number(text) is None:
+        return Checked(None, f"Hot-pixel σ: “{text}” is neither a number nor off")
+    return _in_range(text, "Hot-pixel σ", "", 0.0, MAX_HOT_PIXEL_SIGMA, True, "type off to keep every pixel")
+
+
+def window_note(start: float, window: float, duration_s: float | None) -> str:
+    """What a window that runs past the end of the recording counts ("" when it does not)."""
+    if duration_s is None or start + window <= duration_s:
+        return ""
+    return (f"the window ends {start + window - duration_s:.3g} s after the recording: "
+            f"it counts the last {duration_s - start:.3g} s")

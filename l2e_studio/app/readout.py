@@ -1,7 +1,7 @@
 """The live MI readout: the engine's MI of every scene, and of the included ones pooled.
 
 One :class:`~l2e_studio.objective.SceneStack` of all loaded scenes is built once (and again
-when the smoothing sigma changes); one evaluation gives the per-scene values and the joint
+when the smoothing sigma changes; a rebuilt event map replaces only its scene's); one evaluation gives the per-scene values and the joint
 histograms, pooled by the engine over the included scenes. No MI arithmetic lives here.
 """
 
@@ -45,6 +45,7 @@ class MiReadout:
         self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0, objective: str = "auto"
     ) -> None:
         self._lock = threading.Lock()
+        self.generation = 0  # counts changes of the stack's maps (sigma or a map)
         self._stack = SceneStack.build(
             scenes, camera, sigma, reference=reference,
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
@@ -68,6 +69,14 @@ class MiReadout:
     def set_sigma(self, sigma: float) -> None:
         with self._lock:
             self._stack = self._stack.with_sigma(float(sigma))
+            self.generation += 1
+
+    def set_map(self, index: int, raw_map: np.ndarray) -> None:
+        """Score scene ``index`` against ``raw_map`` from now on (a stack already handed out,
+        e.g. to a running optimisation, keeps its maps)."""
+        with self._lock:
+            self._stack = self._stack.with_map(index, raw_map)
+            self.generation += 1
 
     def read(self, extrinsic: Extrinsic, included: Sequence[bool]) -> MiReading:
         """MI of each scene and of the ``included`` scenes' histograms pooled together."""

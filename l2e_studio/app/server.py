@@ -21,13 +21,15 @@ import viser
 
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
 from ..geometry import Extrinsic
-from ..scenes import SceneSet
+from ..io.events import Accumulation, EventStats
+from ..scenes import Scene, SceneSet
 from ..verdict import Verdict, judge
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
 from .pairs import Pair
 from .panels.compare import ComparePanel
+from .panels.event_maps import EventMapsPanel
 from .panels.extrinsic import ExtrinsicPanel
 from .panels.optimise import OptimisePanel
 from .panels.pairs import PairsPanel
@@ -37,6 +39,7 @@ from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
+from .rebuild import MapRebuilder, RebuildSummary, RecordingInfo
 from .state import SessionState
 from .text import num, score_label
 from .workers import LatestWorker, Settle, Ticker
@@ -62,6 +65,10 @@ class App:
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
         self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma, objective)
         self.reading: MiReading | None = None
+        self.recordings = RecordingInfo()  # lengths of the raw event recordings, read on first need
+        self.rebuilder = MapRebuilder(self.camera.width, self.camera.height, self._rebuild_status,
+                                      self._map_rebuilt, self._rebuild_finished)
+        self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self._reference_mi: dict[tuple, float] = {}
         self._cancel: threading.Event | None = None
@@ -78,6 +85,7 @@ class App:
         tabs = gui.add_tab_group()
         with tabs.add_tab("Scenes", viser.Icon.LIST):
             self.scenes = ScenesPanel(self)
+            self.event_maps = EventMapsPanel(self)
         with tabs.add_tab("Seed", viser.Icon.ADJUSTMENTS):
             self.extrinsic = ExtrinsicPanel(self)
             self.pairs = PairsPanel(self)
@@ -96,6 +104,7 @@ class App:
         self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
         self.compare_worker = LatestWorker("compare", self.compare.render)
+        self.recording_worker = LatestWorker("recording", self._read_recording)
         self.refresh()
 
     # --- the URL ----------------------------------------------------------------------------
@@ -144,6 +153,8 @@ class App:
             self.state.select(index)
             self.scenes.show_selection()
             self.view3d.show_scene(index)
+            self.event_maps.show()
+        self.recording_worker.poke()
         self.overlay_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
@@ -193,9 +204,73 @@ class App:
         self.view3d.show_pose(snap.extrinsic)
         self.scenes.show_selection()
         self.results.show(snap)
+        self.recording_worker.poke()
         self.overlay_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
+
+    # --- event maps ---------------------------------------------------------------------------
+    def recording(self, index: int) -> EventStats | str | None:
+        """Scene ``index``'s raw recording: its stats, why they cannot be read, or None (not yet
+        read, or the map is not from raw events)."""
+        scene = self.scene_set.scenes[index]
+        return None if scene.accumulation is None or scene.map_path is None else self.recordings.get(scene.map_path)
+
+    def rebuilding(self) -> bool:
+        """True while event maps are being rebuilt."""
+        return self.rebuilder.busy()
+
+    def rebuild_maps(self, settings: Accumulation, all_event_scenes: bool = False) -> None:
+        """Accumulate the selected scene's map again (or every scene's from raw events) with
+        ``settings``, in the background. Raises RuntimeError (nothing starts) during a run: the
+        run keeps the maps it started with, so a rebuild waits for its end."""
+        with self._ui_lock:
+            if self.state.snapshot().run.active:
+                raise RuntimeError("an optimisation is running (it keeps the maps it started with); rebuild when it ends")
+            scenes = self.scene_set.scenes
+            selected = self.state.snapshot().selected
+            targets = [i for i, sc in enumerate(scenes) if sc.accumulation is not None] if all_event_scenes else [selected]
+            if not targets or scenes[selected].accumulation is None and not all_event_scenes:
+                raise RuntimeError(f"the map of {scenes[selected].name} is not from raw events; there is nothing to rebuild")
+            self.rebuilder.start([(i, scenes[i]) for i in targets], settings)
+            self.event_maps.check()
+            self.optimise.show_start()
+
+    def _rebuild_status(self, text: str) -> None:
+        self.event_maps.show_status(text)
+
+    def _map_rebuilt(self, index: int, scene: Scene) -> None:
+        """A new map for scene ``index``: the readout, the display caches and every view follow."""
+        with self._ui_lock:
+            self.readout.set_map(index, scene.event_map)  # first: it refuses a map that does not fit
+            self.scene_set.scenes[index] = scene
+            self.displays[index] = SceneDisplay(scene)  # the old display caches go with the old map
+            self.view3d.show_map(index)
+            if index == self.state.snapshot().selected:
+                self.event_maps.show()
+        self.overlay_worker.poke()
+        self.mi_worker.poke()
+        self.compare_worker.poke()
+
+    def _rebuild_finished(self, summary: RebuildSummary) -> None:
+        with self._ui_lock:
+            self.event_maps.show_status(summary.line())
+            self.event_maps.show()
+            self.optimise.show_start()
+        if summary.errors:
+            self.notify_all("Map rebuild failed" if not summary.rebuilt else "Some maps were not rebuilt",
+                            "; ".join(summary.errors[:3]), color="red")
+
+    def _read_recording(self) -> None:
+        """Read the selected scene's recording length (once per file) for the Event map fields."""
+        index = self.state.snapshot().selected
+        scene = self.scene_set.scenes[index]
+        if scene.accumulation is None or scene.map_path is None or self.recordings.get(scene.map_path) is not None:
+            return
+        self.recordings.compute(scene.map_path)
+        with self._ui_lock:
+            if self.state.snapshot().selected == index:
+                self.event_maps.show()
 
     # --- workers ----------------------------------------------------------------------------
     def _render_overlay(self) -> None:
@@ -225,8 +300,8 @@ class App:
         # otherwise delay the frame the user is waiting for.
         self.overlay_worker.wait_idle(0.5)
         snap = self.state.snapshot()
+        key = (self.readout.generation, snap.included)  # read first: a newer map only makes it stale
         reading = self.readout.read(snap.extrinsic, snap.included)
-        key = (self.readout.sigma, snap.included)
         if key not in self._reference_mi:
             self._reference_mi[key] = self.readout.read(snap.reference, snap.included).total
         self.reading = reading
@@ -240,8 +315,13 @@ class App:
         return self.optimise.settings()
 
     def start_run(self, settings: CalibrationSettings) -> int:
-        """Start an optimisation of the included scenes from the current extrinsic."""
-        run_id = self.state.begin_run()
+        """Start an optimisation of the included scenes from the current extrinsic (RuntimeError
+        while event maps are being rebuilt)."""
+        with self._ui_lock:
+            if self.rebuilding():
+                raise RuntimeError("event maps are being rebuilt; start when that is done")
+            run_id = self.state.begin_run()
+            maps = {sc.name: sc.map_record() for sc in self.scene_set.scenes}
         snap = self.state.snapshot()
         cancel = threading.Event()
         self._cancel = cancel
@@ -254,6 +334,7 @@ class App:
                 # the readout's stack already holds every scene: no second load or stacking
                 stack = self.readout.stack.subset(np.asarray(snap.included, dtype=bool))
                 result = calibrate(stack, None, snap.extrinsic, settings, on_progress, cancel)
+                self.result_maps = maps
                 self.state.finish_run(run_id, result, verdict=self._judge(stack, result, settings, cancel))
             except Exception as exc:  # shown to the user; the app keeps running
                 log.exception("optimisation failed")
@@ -261,6 +342,7 @@ class App:
             self._run_finished(run_id)
 
         self.optimise.show_running(True)
+        self.event_maps.check()  # Rebuild waits for the run's end
         self._ticker = Ticker("progress", self._push_progress, lambda: self.state.snapshot().run.active, PROGRESS_PERIOD)
         self._run_thread = threading.Thread(target=work, name="l2e-calibrate", daemon=True)
         self._run_thread.start()
@@ -309,6 +391,7 @@ class App:
         snap = self.state.snapshot()
         self.optimise.show_progress(snap.run)
         self.optimise.show_running(False)
+        self.event_maps.check()
         self.held_out = self._score_held_out(snap.result)
         self.results.show(snap, self.held_out)
         self.overlay_worker.poke()
@@ -351,7 +434,12 @@ class App:
             raise RuntimeError("there is no result to save")
         image = self.compare.compose(snap, mode="side by side", scale=1.0)
         held = self._score_held_out(snap.result)  # the inclusion may have changed since the run
-        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held, snap.verdict)
+        now = {sc.name: sc.map_record() for sc in self.scene_set.scenes}
+        # optimised scenes: the maps the run used; held-out scenes are scored now, on today's maps
+        maps = {name: (now if name in {h.name for h in held} else self.result_maps).get(name, now.get(name))
+                for name in self.state.scene_names}
+        return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held,
+                           snap.verdict, maps)
 
     def set_out_dir(self, text: str) -> str:
         """Use the folder ``text`` for results and seeds from now on; returns a note ("" if none).
@@ -390,7 +478,8 @@ class App:
         self.cancel_run()
         self.wait_run(5.0)
         self.overlay_settle.stop()
-        for worker in (self.overlay_worker, self.mi_worker, self.compare_worker):
+        self.rebuilder.wait(5.0)
+        for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.recording_worker):
             worker.stop()
         self.server.stop()
 

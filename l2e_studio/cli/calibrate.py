@@ -123,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         console.print(_summary(result, scene_set.seed))
     if verdict is not None:
         print("\n".join(verdict.lines()), flush=True)
-    data = result_bytes(args.out, result, scene_set.camera, scene_set.root, quality, verdict)
+    maps = {sc.name: sc.map_record() for sc in scene_set.scenes}
+    data = result_bytes(args.out, result, scene_set.camera, scene_set.root, quality, verdict, maps)
     try:
         out, backup = args.out, atomic_write_bytes(args.out, data, keep_existing=True)
     except OSError as exc:

@@ -49,6 +49,34 @@ CACHE_SUFFIX = ".l2ecache.npz"
 _CACHE_VERSION = 1
 
 
+@dataclass(frozen=True)
+class Accumulation:
+    """How a raw recording becomes a map: count events over ``[t0 + start_s, + window_s)``
+    (``t0`` the first event), optionally zero hot pixels (``hot_pixel_sigma``; None = off)."""
+
+    window_s: float = 3.0
+    start_s: float = 0.0
+    hot_pixel_sigma: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.window_s > 0:
+            raise ValueError(f"the window must be positive, got {self.window_s:g} s")
+        if not self.start_s >= 0:
+            raise ValueError(f"the start must be 0 s or later, got {self.start_s:g} s")
+        if self.hot_pixel_sigma is not None and not self.hot_pixel_sigma > 0:
+            raise ValueError(f"the hot-pixel sigma must be positive (or off), got {self.hot_pixel_sigma:g}")
+
+    def to_dict(self) -> dict:
+        """Plain types, as result files record them."""
+        return {"window_s": float(self.window_s), "start_s": float(self.start_s),
+                "hot_pixel_sigma": None if self.hot_pixel_sigma is None else float(self.hot_pixel_sigma)}
+
+    def describe(self) -> str:
+        """One line, e.g. ``3 s from 0 s, hot pixels off``."""
+        hot = "off" if self.hot_pixel_sigma is None else f"σ {self.hot_pixel_sigma:g}"
+        return f"{self.window_s:g} s from {self.start_s:g} s, hot pixels {hot}"
+
+
 @dataclass
 class EventChunk:
     """A run of events: x, y (uint16), t_us (int64, microseconds), p (uint8, 0/1)."""
@@ -293,6 +321,14 @@ def cache_paths(path: Path) -> list[Path]:
     return [user / f"{path.name}.{digest}{CACHE_SUFFIX}", path.with_name(path.name + CACHE_SUFFIX)]
 
 
+def accumulate_with(
+    path: str | Path, settings: Accumulation, width: int | None = None, height: int | None = None, use_cache: bool = True,
+) -> np.ndarray:
+    """:func:`accumulate_events_cached` with the parameters of ``settings``."""
+    return accumulate_events_cached(path, settings.window_s, settings.start_s, settings.hot_pixel_sigma,
+                                    width, height, use_cache)
+
+
 def accumulate_events_cached(
     path: str | Path,
     window_s: float = 3.0,
@@ -306,7 +342,8 @@ def accumulate_events_cached(
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "event file not found")
-    params = dict(window_s=float(window_s), start_s=start_s, hot=hot_pixel_sigma, width=width, height=height)
+    hot = None if hot_pixel_sigma is None else float(hot_pixel_sigma)
+    params = dict(window_s=float(window_s), start_s=float(start_s or 0.0), hot=hot, width=width, height=height)
     key = _cache_key(path, **params)
     if use_cache:
         for cpath in cache_paths(path):

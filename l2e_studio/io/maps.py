@@ -51,6 +51,16 @@ def map_suffix(path: str | Path) -> str | None:
     return max(matches, key=len) if matches else None
 
 
+def is_event_recording(path: str | Path) -> bool:
+    """Whether :func:`load_map` accumulates ``path`` from raw events (rather than reading an image
+    or a 2D ``.npy`` map)."""
+    path = Path(path)
+    suffix = map_suffix(path)
+    if suffix is None or suffix in IMAGE_SUFFIXES:
+        return False
+    return not (suffix == ".npy" and path.is_file() and is_map_npy(path))
+
+
 def guess_kind(path: str | Path, channels: int = 1) -> str:
     """The map kind of a file by the rules in the module docstring."""
     path = Path(path)
@@ -103,7 +113,7 @@ def load_map(
         raise InputError(path, "map file not found")
     if suffix in IMAGE_SUFFIXES:
         image, channels = _read_image(path, width, height)
-    elif suffix == ".npy" and is_map_npy(path):
+    elif not is_event_recording(path):
         image, channels = _read_npy_map(path), 1
     else:
         from .events import accumulate_events_cached

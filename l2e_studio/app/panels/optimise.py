@@ -107,7 +107,7 @@ class OptimisePanel:
         if problems is None:
             problems = [c.problem for c in self.checked() if c.problem]
         snap = self.app.state.snapshot()
-        reason = start_blocker(sum(snap.included), problems, snap.run.active)
+        reason = start_blocker(sum(snap.included), problems, snap.run.active, self.app.rebuilding())
         self.start.disabled = bool(reason)
         self.blocker.content = f"Start is disabled: {reason}." if reason and not snap.run.active else ""
         self.blocker.visible = bool(self.blocker.content)

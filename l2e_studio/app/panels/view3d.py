@@ -117,3 +117,8 @@ class View3D:
         self.cloud.colors = colors
         self.frustum.image = disp.thumbnail()
         self.shown_scene = index
+
+    def show_map(self, index: int) -> None:
+        """Scene ``index``'s map changed: redraw the camera's thumbnail if it shows that scene."""
+        if index == self.shown_scene:
+            self.frustum.image = self.app.displays[index].thumbnail()
