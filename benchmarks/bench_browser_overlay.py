@@ -72,6 +72,10 @@ def build_scene_set(n: int, points: int, width: int, height: int) -> SceneSet:
     return SceneSet(Path(mkdtemp(prefix="l2e_bench_")), camera, seed, scenes)
 
 
+RECEIVED: list[float] = []  # epoch ms at which the server received each extrinsic change
+QUEUED: list[float] = []  # epoch ms at which each frame was encoded and queued
+
+
 def instrument(app) -> list[float]:
     """Time, in the server, from each extrinsic change to the end of the first frame after it."""
     pending: list[float] = []
@@ -80,6 +84,7 @@ def instrument(app) -> list[float]:
 
     def timed_set(*a, **k):
         pending.append(time.perf_counter())
+        RECEIVED.append(time.time() * 1e3)
         return set_ext(*a, **k)
 
     def timed_render(*a, **k):
@@ -87,6 +92,7 @@ def instrument(app) -> list[float]:
         done = [t for t in pending if t <= started]
         render(*a, **k)
         end = time.perf_counter()
+        QUEUED.append(time.time() * 1e3)
         out.extend(end - t for t in done)
         del pending[:len(done)]
 
@@ -103,6 +109,20 @@ def latencies(inputs: list[float], frames: list[list[float]]) -> np.ndarray:
     ft = np.array([f[0] for f in frames]) if frames else np.zeros(0)
     out = [first_after(ft, t) - t for t in inputs if first_after(ft, t) is not None]
     return np.array(out)
+
+
+def legs(inputs: np.ndarray, received: np.ndarray, queued: np.ndarray, shown: np.ndarray) -> None:
+    """Where a step's latency goes (epoch ms; the page and the server share the machine's clock)."""
+    a, b, c = [], [], []
+    for t in inputs:
+        r = first_after(received, t)
+        q = first_after(queued, r) if r is not None else None
+        f = first_after(shown, q) if q is not None else None
+        if f is not None:
+            a.append(r - t), b.append(q - r), c.append(f - q)
+    if a:
+        print(f"  legs (median): key press -> server receives {np.median(a):.0f} ms; -> frame queued "
+              f"{np.median(b):.0f} ms; -> frame shown {np.median(c):.0f} ms")
 
 
 def summary(name: str, lat: np.ndarray, sizes: list[float]) -> str:
@@ -125,6 +145,7 @@ def main() -> None:
     parser.add_argument("--viewport", default="1366x768")
     parser.add_argument("--no-3d", action="store_true", help="diagnosis: leave the 3D gizmo still")
     parser.add_argument("--no-mi", action="store_true", help="diagnosis: no MI readout updates")
+    parser.add_argument("--cloud-step", type=int, default=1, help="diagnosis: show every k-th point in the 3D view")
     args = parser.parse_args()
 
     from playwright.sync_api import sync_playwright
@@ -140,6 +161,9 @@ def main() -> None:
     server_lat = instrument(app)
     if args.no_3d:
         app.view3d.show_pose = lambda extrinsic: None
+    if args.cloud_step > 1:
+        app.view3d.cloud.points = app.view3d.cloud.points[:: args.cloud_step]
+        app.view3d.cloud.colors = app.view3d.cloud.colors[:: args.cloud_step]
     if args.no_mi:
         app.mi_worker.poke = lambda: None
     try:
@@ -168,6 +192,8 @@ def main() -> None:
             data = page.evaluate("() => [window.__inputs, window.__frames, window.__readouts]")
             inputs, frames, readouts = data
             print(summary("steps (one key press, then rest)", latencies(inputs, frames), [f[1] for f in frames]))
+            origin = page.evaluate("() => performance.timeOrigin")
+            legs(np.array(inputs) + origin, np.array(RECEIVED), np.array(QUEUED), np.array([f[0] for f in frames]) + origin)
             rt = np.array(readouts)
             rl = np.array([first_after(rt, t) - t for t in inputs if first_after(rt, t) is not None])
             if rl.size:

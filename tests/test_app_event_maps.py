@@ -212,9 +212,9 @@ def test_a_scene_read_as_an_image_says_so_and_offers_nothing(tmp_path, monkeypat
 # --- in the browser ----------------------------------------------------------------------------------
 
 def settled_digest(page, app) -> str:
-    """The overlay's digest once the server has sent its full-size frame at rest and the page
+    """The overlay's digest once the server has sent its frame at rest and the page
     shows it (a preview while things move has other bytes for the same picture)."""
-    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.full_frame, what="the full-size frame at rest")
+    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the frame at rest")
     previous = overlay_digest(page)
     while True:
         time.sleep(0.4)

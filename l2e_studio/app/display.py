@@ -17,7 +17,7 @@ from ..scenes import Scene
 from .overlay import grey_rgb, intensity_colors, normalise_map
 
 MAP_MODES = ("raw", "smoothed")
-MAX_CLOUD_POINTS = 150_000
+MAX_CLOUD_POINTS = 40_000  # in the 3D view (picking uses every point); each redraw costs a GPU-less browser ~1 us per point
 
 
 @dataclass

@@ -48,7 +48,11 @@ log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
 PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
-OVERLAY_REST_S = 0.3  # s without a change before the full-size overlay replaces the preview
+OVERLAY_REST_S = 0.3  # s without a change before the frame at rest replaces the preview
+#: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
+#: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
+#: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
+POSE_3D_REST_S = 1.0
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
@@ -98,10 +102,11 @@ class App:
         self.compare = ComparePanel(self, self.overlay)
         self.view3d = View3D(self)
 
-        self._want_full = True  # the next overlay frame is full size (at start, and at rest)
+        self._want_rest = True  # the next overlay frame is the one at rest (at start, and once inputs stop)
         self._pose_3d_pending = False
         self.overlay_worker = LatestWorker("overlay", self._render_overlay)
         self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
+        self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
         self.compare_worker = LatestWorker("compare", self.compare.render)
         self.recording_worker = LatestWorker("recording", self._read_recording)
@@ -141,6 +146,7 @@ class App:
             self.extrinsic.show(extrinsic, values, source)
             if source in DEFERRED_3D_SOURCES:
                 self._pose_3d_pending = True  # the 3D view follows once the input rests
+                self.pose_settle.poke()
             elif source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
@@ -276,24 +282,27 @@ class App:
     def _render_overlay(self) -> None:
         t0 = time.perf_counter()
         snap = self.state.snapshot()
-        full, self._want_full = self._want_full, False
-        self.overlay.render(snap, full=full)
-        if not full:
+        rest, self._want_rest = self._want_rest, False
+        self.overlay.render(snap, rest=rest)
+        if not rest:
             self.overlay_settle.poke()
         self.overlay_seconds.append(time.perf_counter() - t0)
         del self.overlay_seconds[:-200]
 
     def _overlay_at_rest(self) -> None:
-        """Nothing moved for a moment: send the full-size frame (previews are display-sized),
-        and pose the 3D camera (redrawing the 3D view on every step of a drag costs a browser
-        without a GPU hundreds of milliseconds, and would delay the overlay)."""
-        if self._pose_3d_pending:
-            with self._ui_lock:
+        """Nothing moved for a moment: send the frame at rest (the best quality within the
+        byte budget; previews are coarser)."""
+        if not self.overlay.rest_frame:
+            self._want_rest = True
+            self.overlay_worker.poke()
+
+    def _pose_3d_at_rest(self) -> None:
+        """Rapid inputs stopped: pose the 3D camera (not on every step of a drag or of a run of
+        key presses, see ``POSE_3D_REST_S``)."""
+        with self._ui_lock:
+            if self._pose_3d_pending:
                 self._pose_3d_pending = False
                 self.view3d.show_pose(self.state.snapshot().extrinsic)
-        if not self.overlay.full_frame:
-            self._want_full = True
-            self.overlay_worker.poke()
 
     def _update_mi(self) -> None:
         # The overlay goes first: on 2 cores an MI evaluation of many full-size scenes would
@@ -478,6 +487,7 @@ class App:
         self.cancel_run()
         self.wait_run(5.0)
         self.overlay_settle.stop()
+        self.pose_settle.stop()
         self.rebuilder.wait(5.0)
         for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.recording_worker):
             worker.stop()

@@ -103,8 +103,8 @@ class Ticker:
 class Settle:
     """Call ``job()`` once things have been quiet for ``quiet`` seconds after the last :meth:`poke`.
 
-    Used to send the full-size overlay once a drag or a burst of key presses has stopped
-    (the frames during it are display-sized previews).
+    Used to send the overlay's frame at rest once a drag or a burst of key presses has stopped
+    (the frames during it are coarser previews), and to pose the 3D view then.
     """
 
     def __init__(self, name: str, job: Callable[[], None], quiet: float = 0.3) -> None:

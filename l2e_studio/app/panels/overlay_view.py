@@ -11,14 +11,15 @@ from ..browser_js import hide_inputs, pointer_marker
 from ..display import MAP_MODES
 from ..exact import parse_number
 from ..inspect import ZOOMS, Window, depth_range, edge_view, legend_html, zoom_window, zoomed
-from ..overlay import COLOR_MODES, OverlayStyle, project_scene, render_overlay
+from ..overlay import COLOR_MODES, OverlayStyle, encode_jpeg, project_scene, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
 
-JPEG_QUALITY = 80
-DISPLAY_WIDTH = 640  # px: about the overlay's width on the page at 1366x768 (previews are sent at this size)
-PREVIEW_JPEG_QUALITY = 50  # a moving preview: ~60 KB per update per tab; the frame at rest uses JPEG_QUALITY
+DISPLAY_WIDTH = 640  # px: about the overlay's width on the page at 1366x768; every frame is sent at this size
+FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
+REST_QUALITIES = (92, 85, 78, 70, 62, 55, 48, 40)  # the frame at rest: the best of these within FRAME_BYTES
+PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAME_BYTES
 PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
 
 
@@ -37,12 +38,39 @@ def _pair(text: str) -> tuple[float, float] | None:
     return None if a is None or b is None else (a, b)
 
 
+def jpeg_within(image: np.ndarray, max_bytes: int, qualities: tuple[int, ...]) -> tuple[bytes, int]:
+    """The JPEG of ``image`` at the best of ``qualities`` (highest first) that fits ``max_bytes``,
+    else at the lowest; found by bisection (at most ~log2(len) encodes of a display-sized frame,
+    ~1 ms each)."""
+    lo, hi = 0, len(qualities) - 1  # the answer's index lies in [lo, hi]
+    best: tuple[bytes, int] | None = None
+    while lo <= hi:
+        mid = (lo + hi) // 2
+        data = encode_jpeg(image, qualities[mid])
+        if len(data) <= max_bytes:
+            best, hi = (data, qualities[mid]), mid - 1
+        else:
+            lo = mid + 1
+    return best if best is not None else (encode_jpeg(image, qualities[-1]), qualities[-1])
+
+
 def display_sized(image: np.ndarray, width: int = DISPLAY_WIDTH) -> np.ndarray:
     """``image`` shrunk to ``width`` pixels wide (area averaging); unchanged when not wider."""
     h, w = image.shape[:2]
     if w <= width:
         return image
     return cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
+
+
+def send_jpeg(handle, image: np.ndarray, data: bytes) -> None:
+    """Show ``data`` (the JPEG of ``image``) in a viser image element without encoding again.
+
+    viser 1.1 has no public way to send encoded bytes; its image setter encodes the array and
+    assigns these two synced properties, which is what this does with bytes already sized to
+    the budget."""
+    handle._image = image
+    handle._format = "jpeg"
+    handle._data = data
 
 
 class OverlayPanel:
@@ -54,7 +82,9 @@ class OverlayPanel:
         cam = app.camera
         self.panel = gui.add_panel()
         self.frames = 0
-        self.full_frame = True  # whether the last frame sent was full size
+        self.rest_frame = True  # whether the last frame sent was the one at rest (not a preview)
+        self.frame_bytes = 0  # size of the last frame sent, and its JPEG quality
+        self.frame_quality = 0
         with self.panel.add_tab("Overlay"):
             # Stretch the overlay images to the panel's width (viser shows images at most at
             # their own size; small maps would otherwise stay small).
@@ -62,7 +92,7 @@ class OverlayPanel:
             self.caption = gui.add_markdown("Loading...")
             gui.add_html(pointer_marker("Overlay pointer"))
             self.image = gui.add_image(
-                np.zeros((cam.height, cam.width, 3), np.uint8), format="jpeg", jpeg_quality=JPEG_QUALITY
+                np.zeros((cam.height, cam.width, 3), np.uint8), format="jpeg", jpeg_quality=REST_QUALITIES[0]
             )
             self.legend = gui.add_html(legend_html("intensity"))
             self.zoom = gui.add_dropdown("Zoom", tuple(ZOOMS), initial_value="fit",
@@ -116,11 +146,10 @@ class OverlayPanel:
         colors = disp.colors() if style.color_by == "intensity" else None
         return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
 
-    def render(self, snap: Snapshot, full: bool = True) -> None:
-        """Draw the overlay; ``full=False`` sends a display-sized preview (while controls move).
-
-        Zoomed views are always display-sized (a window of the map at native resolution or
-        magnified), so they need no preview."""
+    def render(self, snap: Snapshot, rest: bool = True) -> None:
+        """Draw the overlay and send it display-sized within ``FRAME_BYTES``: at the best quality
+        that fits when ``rest``, as a quicker, coarser preview while controls move. Zoomed
+        views are display-sized windows of the map at native resolution or magnified."""
         style = self.style()
         index, extrinsic = snap.selected, snap.shown_extrinsic
         disp = self.app.displays[index]
@@ -135,12 +164,11 @@ class OverlayPanel:
             image = self.draw(index, extrinsic, style)
         zoom = self.zoom.value
         window = zoom_window(image.shape, zoom, self.centre, DISPLAY_WIDTH)
-        if zoom != "fit":
-            image, full = zoomed(image, window, zoom), True
-        # viser 1.1 has no public per-frame quality; its handle reads this attribute when encoding
-        self.image._jpeg_quality = JPEG_QUALITY if full else PREVIEW_JPEG_QUALITY
-        self.image.image = image if full else display_sized(image)
-        self.window, self.full_frame = window, full
+        image = display_sized(image) if zoom == "fit" else zoomed(image, window, zoom)
+        data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES)
+        send_jpeg(self.image, image, data)
+        self.window, self.rest_frame = window, rest
+        self.frame_bytes, self.frame_quality = len(data), quality
         self.frames += 1
         depth = depth_range(projection.depth) if projection is not None and style.color_by == "depth" else None
         legend = legend_html(style.color_by, depth, disp.scene.map_kind)
