@@ -287,7 +287,11 @@ class _Run:
             if self.cancel is not None and self.cancel.is_set():
                 self.cancelled, self.message = True, "cancelled"
                 break
-            obj = self.stack.with_sigma(stage.sigma, stage.scale).objective(self.seed, start=current, max_points=stage.max_points)
+            prepared = self.stack.with_sigma(stage.sigma, stage.scale)  # the stage's set-up: ~0.3 s at 40 full-size maps
+            if self.cancel is not None and self.cancel.is_set():
+                self.cancelled, self.message = True, "cancelled"
+                break
+            obj = prepared.objective(self.seed, start=current, max_points=stage.max_points)
             tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
                                self.count, self.history)
             try:

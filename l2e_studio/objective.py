@@ -30,7 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from .camera import CameraModel
 from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
-from .pixel_index import count_pairs, pixel_index
+from . import compiled
 from .scoring import OBJECTIVES
 from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
@@ -163,6 +163,8 @@ class SceneStack:
         """The stack of only some scenes (indices or a boolean mask), in their original order."""
         idx = np.asarray(scenes)
         idx = np.flatnonzero(idx) if idx.dtype == bool else np.unique(idx)
+        if np.array_equal(idx, np.arange(self.n_scenes)):
+            return self  # all of them: no copy (and the caches derived from the maps stay valid)
         renumber = np.full(self.n_scenes, -1, dtype=np.int32)
         renumber[idx] = np.arange(idx.size, dtype=np.int32)
         keep = renumber[self.scene_of] >= 0
@@ -201,6 +203,16 @@ class SceneStack:
         return _project_inside(self.points, extrinsic.R.astype(np.float32),
                                extrinsic.translation.astype(np.float32), self.camera)
 
+    def pixels(self, extrinsic: Extrinsic) -> np.ndarray:
+        """(N,) int32 index ``row * W + col`` of the pixel nearest each projected point in its
+        scene's map, -1 for points off the image (compiled, on the worker threads)."""
+        R = extrinsic.R.astype(np.float32)
+        t = extrinsic.translation.astype(np.float32)
+        out = np.empty(self.n_points, np.int32)
+        _run_chunks(lambda a, b: compiled.pixel_index(self.points[:, a:b], R, t, self.camera, MIN_DEPTH, out[a:b]),
+                    self.n_points)
+        return out
+
     def joint_histograms(self, extrinsic: Extrinsic, per_scene: bool = True) -> np.ndarray:
         """(S, 256, 256) int32 joint (L, E) counts per scene, nearest-pixel lookup, in-image
         points; with ``per_scene=False`` the (1, 256, 256) counts of all scenes pooled."""
@@ -225,8 +237,8 @@ class SceneStack:
             pix = np.empty(min(CHUNK, b - a), np.int32)
             for c in range(a, b, CHUNK):
                 d = min(c + CHUNK, b)
-                index = pixel_index(self.points[:, c:d], R, t, self.camera, MIN_DEPTH, pix)
-                count_pairs(index, self.l_bins[c:d], e_bins[s], joints[s])
+                index = compiled.pixel_index(self.points[:, c:d], R, t, self.camera, MIN_DEPTH, pix)
+                compiled.count_pairs(index, self.l_bins[c:d], e_bins[s], joints[s])
             if then is not None:
                 then(s, joints[s])
 
@@ -263,11 +275,11 @@ class SceneStack:
         "no edge"): (the scenes pooled, per scene), as :meth:`mi` returns them."""
         if self.weights is None:
             raise ValueError("this stack was not built for the edges objective")
-        uv, inside = self.project(extrinsic)
+        pix = self.pixels(extrinsic).astype(np.int64)
         S, Hp, Wp = self.maps.shape
-        ui = np.where(inside, np.rint(uv[:, 0]), -1.0).astype(np.int64) + 1
-        vi = np.where(inside, np.rint(uv[:, 1]), -1.0).astype(np.int64) + 1
-        e = self.maps.reshape(-1)[(self.scene_of * Hp + vi) * Wp + ui].astype(np.float64)
+        row, col = np.divmod(pix, Wp - 2)
+        flat = np.where(pix >= 0, (self.scene_of * Hp + row + 1) * Wp + col + 1, self.scene_of * Hp * Wp)
+        e = self.maps.reshape(-1)[flat].astype(np.float64)  # off the image: the border, "no edge"
         contrib = self.weights * (e - edges.OFFSET) / edges.SCALE
         num = np.bincount(self.scene_of, weights=contrib, minlength=S)
         den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
@@ -292,7 +304,7 @@ class SceneStack:
         """The differentiable score as a function of a correction of ``base``, over the points
         that land in the image at ``start`` (default: ``base``), thinned to ``max_points``."""
         start = base if start is None else start
-        _, inside = self.project(start)
+        inside = self.pixels(start) >= 0
         cls = EdgeObjective if self.objective_name == "edges" else MIObjective
         return cls(self.select(inside).thinned(max_points), base, start)
 
@@ -302,9 +314,8 @@ class MapObjective:
     ``base``: the bilinear map lookup and its Jacobian, shared by the concrete scores.
 
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
-    Points are processed in cache-sized chunks. The four map values around each projected
-    point come from a single gather: the map is packed as four 16-bit fixed-point neighbours
-    (1/256 of a count) per pixel.
+    Points are processed in cache-sized chunks; the projection and its Jacobian are numpy,
+    the bilinear lookup of the float32 maps is compiled (:func:`l2e_studio.compiled.bilinear`).
     """
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
@@ -315,10 +326,10 @@ class MapObjective:
         dt, dw = base.delta_to(base if start is None else start)
         self.start = np.concatenate([dt, dw])  # ``start`` as a correction of ``base``
         S, Hp, Wp = stack.maps.shape
-        self._qw = Wp - 1  # row length of the packed map
+        self._maps = stack.maps.reshape(-1)
+        self._qw = Wp - 1  # the last column and row a lookup may start from (+1 for its neighbour)
         self._qh = Hp - 1
-        self._quads = _packed(stack.maps)
-        self._scene_base = (stack.scene_of * (self._qh * self._qw)).astype(np.int32)
+        self._scene_base = stack.scene_of.astype(np.int64) * (Hp * Wp)
         self._K = stack.camera.K.astype(np.float32)
         self.n = float(stack.n_points)
 
@@ -366,21 +377,13 @@ class MapObjective:
         uc = np.clip(u, 0.0, u_max)
         vc = np.clip(v, 0.0, v_max)
         uc[~front] = 0.0
-        uf = np.floor(uc)
-        vf = np.floor(vc)
-        fu = uc - uf
-        fv = vc - vf
-        idx = self._scene_base[a:b] + vf.astype(np.int32) * np.int32(self._qw) + uf.astype(np.int32)
-        q = self._quads.take(idx).view(np.uint16).reshape(-1, 4)
-        m00, m01, m10, m11 = (q[:, k].astype(np.float32) for k in range(4))
-        top = m00 + fu * (m01 - m00)
-        bot = m10 + fu * (m11 - m10)
-        e_out[a:b] = (top + fv * (bot - top)) * np.float32(1.0 / QUANT)
+        e = e_out[a:b]
+        de_du = np.empty_like(uc) if d_out is not None else None
+        de_dv = np.empty_like(vc) if d_out is not None else None
+        compiled.bilinear(self._maps, self._scene_base[a:b], self._qw + 1, uc, vc, e, de_du, de_dv)
         if d_out is None:
             return
-        # de/du, de/dv of the bilinear patch (zero where the point was clamped to the border)
-        de_du = ((m01 - m00) + fv * ((m11 - m10) - (m01 - m00))) * np.float32(1.0 / QUANT)
-        de_dv = (bot - top) * np.float32(1.0 / QUANT)
+        # the lookup's derivatives are zero where the point was clamped to the border
         de_du[(u <= 0.0) | (u >= u_max) | ~front] = 0.0
         de_dv[(v <= 0.0) | (v >= v_max) | ~front] = 0.0
         dxd_dx, dxd_dy, dyd_dx, dyd_dy = Jd
@@ -482,7 +485,6 @@ class MIObjective(MapObjective):
         return mi, np.append(W.reshape(-1), 0.0)
 
 
-QUANT = 256.0  # fixed-point steps per count in the packed map
 #: Threads that evaluate chunks of points in parallel.
 WORKERS = int(os.environ.get("L2E_THREADS", min(4, os.cpu_count() or 1)))
 _POOL: ThreadPoolExecutor | None = None
@@ -522,8 +524,8 @@ E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
 #: Arrays derived from a maps stack, keyed by (the maps array, what): stacks made by ``select``
-#: share their maps, so the objectives of a verdict's half-scene refinements (and of a stage
-#: revisited from another start) reuse one packing instead of rewriting ~300 MB each time.
+#: and ``subset`` of all scenes share their maps, so every evaluation of the readout's stack, and
+#: of the half-scene stacks of a verdict, reuses one derivation.
 _DERIVED: list[tuple[weakref.ref, str, np.ndarray]] = []
 _DERIVED_KEEP = 4
 _DERIVED_LOCK = threading.Lock()
@@ -542,28 +544,14 @@ def _derived(maps: np.ndarray, what: str, build: Callable[[np.ndarray], np.ndarr
     return value
 
 
-def _packed(maps: np.ndarray) -> np.ndarray:
-    """:func:`_pack_quads` of ``maps`` (cached)."""
-    return _derived(maps, "packed", _pack_quads)
-
-
 def _e_bins(maps: np.ndarray) -> np.ndarray:
     """(S, H*W) uint8: each map pixel's E bin for the paper's MI (nearest bin; cached)."""
-    return _derived(maps, "e_bins", lambda m: np.clip(np.rint(m[:, 1:-1, 1:-1]), 0, N_BINS - 1)
-                    .astype(np.uint8).reshape(m.shape[0], -1))
-
-
-def _pack_quads(maps: np.ndarray) -> np.ndarray:
-    """(S, H+2, W+2) padded maps -> (S*(H+1)*(W+1),) uint64: the 2x2 neighbourhood of each pixel
-    as four uint16 fixed-point values (top-left, top-right, bottom-left, bottom-right)."""
-    q = np.rint(np.clip(maps, 0, CLIP["image"]) * QUANT).astype(np.uint16)
-    S, Hp, Wp = q.shape
-    packed = np.empty((S, Hp - 1, Wp - 1, 4), dtype=np.uint16)
-    packed[..., 0] = q[:, :-1, :-1]
-    packed[..., 1] = q[:, :-1, 1:]
-    packed[..., 2] = q[:, 1:, :-1]
-    packed[..., 3] = q[:, 1:, 1:]
-    return packed.view(np.uint64).reshape(-1)
+    def build(m: np.ndarray) -> np.ndarray:
+        S, Hp, Wp = m.shape
+        out = np.empty((S, Hp - 2, Wp - 2), np.uint8)
+        _run_tasks(lambda s: compiled.e_bins(m[s], out[s]), range(S))
+        return out.reshape(S, -1)
+    return _derived(maps, "e_bins", build)
 
 
 def single_threaded_blas():
@@ -598,15 +586,18 @@ def _stack_maps(
     factor = out_w / w
     if objective == "edges":
         out = np.full((len(raw), out_h + 2, out_w + 2), edges.OFFSET, dtype=np.float32)
-        for i, m in enumerate(raw):
-            out[i, 1:-1, 1:-1] = edges.edge_map(m, sigma * factor, (out_w, out_h))
-        return out
-    out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
-    for i, (m, kind) in enumerate(zip(raw, kinds)):
-        m = np.clip(m, 0.0, CLIP[kind])
-        if (out_w, out_h) != (w, h):
-            m = cv2.resize(m, (out_w, out_h), interpolation=cv2.INTER_AREA)
-        out[i, 1:-1, 1:-1] = prepare_map(m, sigma * factor, CLIP[kind])
+
+        def prepare(i: int) -> None:
+            out[i, 1:-1, 1:-1] = edges.edge_map(raw[i], sigma * factor, (out_w, out_h))
+    else:
+        out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
+
+        def prepare(i: int) -> None:
+            m = np.clip(raw[i], 0.0, CLIP[kinds[i]])
+            if (out_w, out_h) != (w, h):
+                m = cv2.resize(m, (out_w, out_h), interpolation=cv2.INTER_AREA)
+            out[i, 1:-1, 1:-1] = prepare_map(m, sigma * factor, CLIP[kinds[i]])
+    _run_tasks(prepare, range(len(raw)))  # OpenCV releases the GIL: one map per core
     return out
 
 

