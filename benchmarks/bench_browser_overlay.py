@@ -68,7 +68,8 @@ def build_scene_set(n: int, points: int, width: int, height: int) -> SceneSet:
     T[:3, 3] = (0.05, -0.1, 0.02)
     seed = Extrinsic.from_matrix(T)
     event_map = event_map_for(pts, seed, camera)
-    scenes = [Scene(f"scene_{i:03d}", pts, intensity, event_map, "events") for i in range(n)]
+    # the same picture, in arrays of their own (memory as with n real scenes)
+    scenes = [Scene(f"scene_{i:03d}", pts.copy(), intensity.copy(), event_map.copy(), "events") for i in range(n)]
     return SceneSet(Path(mkdtemp(prefix="l2e_bench_")), camera, seed, scenes)
 
 
@@ -213,6 +214,40 @@ def main() -> None:
             rest = [f for f in frames if f[0] > t_end + 100]
             if rest:
                 print(f"  at rest after the drag: {len(rest)} frame(s), last {rest[-1][1] / 1000:.1f} KB")
+            # the scene table: a click on a row selects its scene (overlay of that scene shown)
+            # viser's "WebGL in software mode" notice may lie over the tabs: close notices first
+            for close in page.locator(".mantine-Notification-root button").all():
+                close.click()
+            page.get_by_role("tab", name="Scenes").click()
+            page.get_by_role("cell", name="scene_000").first.wait_for(timeout=30_000)
+            rng = np.random.default_rng(0)
+            click_lat, selected_at = [], []
+            real_select = app.select_scene
+            app.select_scene = lambda i: (selected_at.append(time.time() * 1e3), real_select(i))[1]
+            origin = page.evaluate("() => performance.timeOrigin")
+            reached = []
+            for k in rng.choice(args.scenes, size=min(10, args.scenes), replace=False):
+                name = f"scene_{int(k):03d}"
+                cell = page.locator("td", has_text=name).first
+                cell.scroll_into_view_if_needed()
+                app.overlay_worker.wait_idle(10)
+                page.evaluate("() => { window.__frames = []; }")
+                t_click = page.evaluate("() => performance.now()")
+                cell.dispatch_event("click")
+                deadline = time.monotonic() + 10
+                while time.monotonic() < deadline:
+                    frames = page.evaluate("() => window.__frames")
+                    if frames and app.state.snapshot().selected == int(k):
+                        click_lat.append(frames[0][0] - t_click)
+                        if selected_at:
+                            reached.append(selected_at[-1] - (origin + t_click))
+                        break
+                    time.sleep(0.01)
+            if click_lat:
+                cl = np.array(click_lat)
+                print(f"table row click -> that scene's overlay shown: median {np.median(cl):.0f} ms, max {cl.max():.0f} ms "
+                      f"({cl.size} clicks, {args.scenes} rows); the click reached the server after "
+                      f"{np.median(reached) if reached else float('nan'):.0f} ms (median)")
             srv = np.array(app.overlay_seconds[-50:]) * 1e3
             print(f"  server render+encode per frame: median {np.median(srv):.0f} ms")
             sl = np.array(server_lat) * 1e3
@@ -222,6 +257,8 @@ def main() -> None:
             browser.close()
     finally:
         app.stop()
+    import resource
+    print(f"peak memory of the app's process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
 if __name__ == "__main__":

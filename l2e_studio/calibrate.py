@@ -231,7 +231,7 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
         # hold side peaks that a seed already in the fine basin should not be dragged to); the
         # final score picks the answer
         final = stack.with_sigma(settings.sigma)
-        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free)
+        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free, cancel)
         climbs = [(seed, 0), (seed, 1)] + [(start, 0) for start in grid]
         ends = []
         for start, first in climbs:
@@ -253,16 +253,23 @@ def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
     return stack.objective_name == "edges"
 
 
-def _grid_starts(coarse: SceneStack, seed: Extrinsic, free: np.ndarray, count: int = GRID_STARTS) -> list[Extrinsic]:
+def _grid_starts(
+    coarse: SceneStack, seed: Extrinsic, free: np.ndarray, cancel: threading.Event | None = None,
+    count: int = GRID_STARTS,
+) -> list[Extrinsic]:
     """The ``count`` best rotation corrections of the seed on a grid (the seed itself left
-    out), scored by the coarsest objective on a thinned point set."""
+    out), scored by the coarsest objective on a thinned point set; none once ``cancel`` is set."""
     if not free[3:].all():
         return []
     obj = coarse.objective(seed, max_points=GRID_POINTS)
     steps = np.radians(GRID_STEP_DEG) * np.arange(-GRID_HALF_STEPS, GRID_HALF_STEPS + 1)
     grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
     grid = grid[np.abs(grid).sum(axis=1) > 0]
-    values = np.array([obj.value(np.concatenate([np.zeros(3), dw])) for dw in grid])
+    values = np.empty(len(grid))
+    for i, dw in enumerate(grid):
+        if cancel is not None and cancel.is_set():
+            return []
+        values[i] = obj.value(np.concatenate([np.zeros(3), dw]))
     return [obj.extrinsic(np.concatenate([np.zeros(3), grid[i]])) for i in np.argsort(values)[::-1][:count]]
 
 

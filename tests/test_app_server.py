@@ -44,7 +44,7 @@ def user(client=None):
 
 
 def idle(app) -> None:
-    for w in (app.overlay_worker, app.mi_worker, app.compare_worker):
+    for w in (app.overlay_worker, app.mi_worker, app.compare_worker, app.scene_3d_worker):
         assert w.wait_idle(20)
 
 
