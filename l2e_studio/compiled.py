@@ -12,9 +12,8 @@ maps where numpy needed a packed copy of 40 full-size maps (300 MB, 0.4-0.8 s pe
 Semantics match :func:`l2e_studio.geometry.project_points` and ``in_image``: the camera frame is
 ``R p + t``; points with depth <= ``min_depth`` or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
 get -1 (the far border is exclusive, so that rounding stays inside); the rest get
-``row * W + col`` of the nearest pixel. The arithmetic is float32, as the
-stacked points are; a point within ~1e-4 px of a pixel border may round the other way than in
-float64.
+``row * W + col`` of the nearest pixel. The arithmetic is float32, as the stacked points are: a
+point within ~1e-4 px of a pixel border may round the other way than in float64.
 """
 
 from __future__ import annotations

@@ -251,8 +251,8 @@ class SceneStack:
         """The paper's MI at ``extrinsic``: (the scenes pooled, per scene; NaN without ``per_scene``).
 
         ``pooled`` (a boolean mask over the scenes) picks the scenes whose histograms are summed
-        for the first value; by default all. NaN when the mask picks none. Each scene's value is computed in the task that counts
-        its points.
+        for the first value; by default all. NaN when the mask picks none. Each scene's value
+        is computed in the task that counts its points.
         """
         per = np.full(self.n_scenes, np.nan)
 
@@ -523,35 +523,29 @@ def _run_tasks(work: Callable, items: Sequence) -> None:
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
-#: Arrays derived from a maps stack, keyed by (the maps array, what): stacks made by ``select``
-#: and ``subset`` of all scenes share their maps, so every evaluation of the readout's stack, and
-#: of the half-scene stacks of a verdict, reuses one derivation.
-_DERIVED: list[tuple[weakref.ref, str, np.ndarray]] = []
-_DERIVED_KEEP = 4
-_DERIVED_LOCK = threading.Lock()
-
-
-def _derived(maps: np.ndarray, what: str, build: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-    """``build(maps)``, cached while ``maps`` lives (maps are never written after stacking)."""
-    with _DERIVED_LOCK:
-        for ref, name, value in _DERIVED:
-            if ref() is maps and name == what:
-                return value
-    value = build(maps)
-    with _DERIVED_LOCK:
-        live = [d for d in _DERIVED if d[0]() is not None]
-        _DERIVED[:] = live[-(_DERIVED_KEEP - 1):] + [(weakref.ref(maps), what, value)]
-    return value
+#: The E bins of the last few map stacks, keyed by the maps array they came from: stacks made by
+#: ``select``, and ``subset`` of all scenes, share their maps, so every evaluation of the
+#: readout's stack (and of a verdict's half-scene stacks) reuses one derivation.
+_E_BINS: list[tuple[weakref.ref, np.ndarray]] = []
+_E_BINS_KEEP = 3
+_E_BINS_LOCK = threading.Lock()
 
 
 def _e_bins(maps: np.ndarray) -> np.ndarray:
-    """(S, H*W) uint8: each map pixel's E bin for the paper's MI (nearest bin; cached)."""
-    def build(m: np.ndarray) -> np.ndarray:
-        S, Hp, Wp = m.shape
-        out = np.empty((S, Hp - 2, Wp - 2), np.uint8)
-        _run_tasks(lambda s: compiled.e_bins(m[s], out[s]), range(S))
-        return out.reshape(S, -1)
-    return _derived(maps, "e_bins", build)
+    """(S, H*W) uint8: each map pixel's E bin for the paper's MI (nearest bin), cached while
+    ``maps`` lives (maps are never written after stacking)."""
+    with _E_BINS_LOCK:
+        for ref, bins in _E_BINS:
+            if ref() is maps:
+                return bins
+    S, Hp, Wp = maps.shape
+    bins = np.empty((S, Hp - 2, Wp - 2), np.uint8)
+    _run_tasks(lambda s: compiled.e_bins(maps[s], bins[s]), range(S))
+    bins = bins.reshape(S, -1)
+    with _E_BINS_LOCK:
+        live = [(r, b) for r, b in _E_BINS if r() is not None]
+        _E_BINS[:] = live[-(_E_BINS_KEEP - 1):] + [(weakref.ref(maps), bins)]
+    return bins
 
 
 def single_threaded_blas():
