@@ -165,12 +165,11 @@ def edge_agreement(stack: SceneStack) -> Callable[[Extrinsic], float]:
     total = float(weights.sum())
 
     def share(ext: Extrinsic) -> float:
-        uv, inside = full.project(ext)
+        pix = full.pixels(ext)  # nearest pixel, -1 off the image
         near = np.zeros(stack.n_points, dtype=bool)
         for s, dist in enumerate(distances):
-            m = inside & (stack.scene_of == s)
-            px = np.rint(uv[m]).astype(np.int64)
-            near[m] = dist[px[:, 1], px[:, 0]] <= radius
+            m = (pix >= 0) & (stack.scene_of == s)
+            near[m] = dist.reshape(-1)[pix[m]] <= radius
         return float(weights[near].sum() / total) if total > 0 else 0.0
 
     return share

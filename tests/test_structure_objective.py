@@ -132,3 +132,25 @@ def test_real_street_scenes_never_end_worse_than_the_seed() -> None:
     verdict = judge(stack, result, mi)
     if result.extrinsic.error_to(rig.reference)[0] > s_deg + 0.1:
         assert verdict.status != "trusted" and verdict.kept_seed, verdict.checks
+
+
+def test_edge_agreement_and_edge_score_take_points_on_the_image_border():
+    """A point projecting exactly onto the far border (u = W - 0.5) rounds to column W with
+    numpy's rint: it must count as off the image, not index past the map (a real-data crash)."""
+    from l2e_studio.verdict import edge_agreement
+
+    cam = CameraModel(np.array([[64.0, 0, 31.5], [0, 64.0, 23.5], [0, 0, 1]]), 64, 48)
+    rng = np.random.default_rng(4)
+    pts = np.column_stack([rng.uniform(-0.4, 0.4, 400), rng.uniform(-0.3, 0.3, 400), rng.uniform(1.5, 3.0, 400)])
+    pts[:4] = [[1.0, 0.0, 2.0], [1.0, 0.2, 2.0], [0.0, 0.75, 2.0], [-0.9921875, 0.0, 2.0]]  # u = 63.5, v = 47.5, u = -0.5
+    img = np.zeros((48, 64), np.float32)
+    img[:, 40:] = 200.0
+    scene = Scene("border", pts.astype(np.float32), rng.uniform(0, 255, 400).astype(np.float32), img, "image")
+    stack = SceneStack.build([scene], cam, 2.0, objective="edges")
+    ident = Extrinsic(np.zeros(3), np.zeros(3))
+    share = edge_agreement(stack)(ident)
+    assert 0.0 <= share <= 1.0
+    total, per = stack.edge_scores(ident)
+    assert np.isfinite(total) and np.isfinite(per).all()
+    pix = stack.pixels(ident)
+    assert pix.max() < 64 * 48 and (pix >= -1).all()
