@@ -250,10 +250,16 @@ def test_zoom_by_click_legend_and_edge_view(page, app):
     labelled_zoom = page.locator("label", has_text="Zoom").first.get_attribute("for")
     page.locator(f"[id='{labelled_zoom}']").click()
     page.get_by_role("option", name="4x").click()
-    wait_for(lambda: app.overlay.window is not None and app.overlay.window.width == 160, what="a 4x window")
+    quarter = round(app.overlay.display_width / 4)  # the frame's width follows the window (1600 px here)
+    wait_for(lambda: app.overlay.window is not None and app.overlay.window.width == min(quarter, cam.width),
+             what="a 4x window")
     w = app.overlay.window
-    assert w.x0 == pytest.approx(0.25 * cam.width - 80, abs=3)  # centred on the click
-    wait_for(lambda: image_natural_width(page) == 640, what="the zoomed frame: 160 map px at 4x")
+    assert w.x0 == pytest.approx(max(0.0, 0.25 * cam.width - w.width / 2), abs=3)  # centred on the click
+    wait_for(lambda: image_natural_width(page) == w.width, what="the zoomed window at map resolution")
+    assert page.evaluate("() => getComputedStyle(document.querySelector(\"img[src^='blob:']\")).imageRendering") \
+        == "pixelated"  # magnified 4x by the browser without smoothing
+    shown = img.bounding_box()["width"]
+    assert shown >= 3.5 * w.width  # each map pixel drawn as a ~4x4 block
     screenshot(page, "16_zoom_4x")
     # a click on the zoomed image pans: the centre moves to the clicked map pixel
     box = img.bounding_box()
@@ -395,3 +401,28 @@ def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
     finally:
         for c in contexts:
             c.close()
+
+
+@pytest.mark.parametrize("size", [(1366, 768), (1920, 1080)])
+def test_the_overlay_gets_the_space_at_both_layouts(browser, app, size):
+    from l2e_studio.app.panels.overlay_view import panel_layout
+    from test_app_browser import open_app
+
+    width, height = size
+    context = browser.new_context(viewport={"width": width, "height": height})
+    try:
+        page = context.new_page()
+        open_app(page, app)
+        panel, frame = panel_layout(width)
+        wait_for(lambda: app.overlay.display_width == frame, what=f"the layout for a {width} px window")
+        img = page.locator("img[src^='blob:']").first
+        wait_for(lambda: img.bounding_box()["width"] >= 0.9 * frame, what="the overlay panel widened")
+        shown = img.bounding_box()["width"]
+        widest_3d = page.evaluate("() => Math.max(...Array.from(document.querySelectorAll('canvas')).map(c => c.clientWidth))")
+        assert shown > widest_3d, f"overlay {shown} px, 3D view {widest_3d} px"
+        assert shown <= width * 0.62
+        app.overlay_worker.wait_idle(10)
+        assert app.overlay.frame_bytes <= 60_000
+        screenshot(page, f"22_layout_{width}x{height}")
+    finally:
+        context.close()

@@ -9,6 +9,8 @@
   marker names; the server reads it from there (viser has no image click events).
 - A click on a row of the scene table (first header cell "use") writes ``select:<scene>`` (or
   ``toggle:<scene>`` on the first cell) into the hidden "Scene pointer" field.
+- The window's size (``"<width>x<height>"``) goes into the hidden "Window size" field once the
+  page is up and after each resize, so that the server can give the overlay the space.
 
 viser renders ``add_html`` content with ``innerHTML``, where a ``<script>`` never runs; an
 ``<img onerror>`` handler does, so the script hangs off a tiny broken image. It installs its
@@ -71,6 +73,14 @@ if (!window.__l2eKeys) {
     const action = e.target.closest('td') === tr.cells[0] ? 'toggle' : 'select';
     setField('Scene pointer', action + ':' + tr.cells[1].textContent.trim() + ',' + Math.round(performance.now()));
   }, true);
+  const reportSize = (tries) => {
+    const lab = Array.from(document.querySelectorAll('label')).find(l => l.textContent.trim() === 'Window size');
+    if (!lab) { if (tries > 0) setTimeout(() => reportSize(tries - 1), 250); return; }
+    setField('Window size', window.innerWidth + 'x' + window.innerHeight);
+  };
+  let sizeTimer = null;
+  window.addEventListener('resize', () => { clearTimeout(sizeTimer); sizeTimer = setTimeout(() => reportSize(0), 300); });
+  reportSize(40);
   document.addEventListener('pointerdown', (e) => onPointer(e, false), true);
   document.addEventListener('pointermove', (e) => { if (e.buttons & 1) onPointer(e, true); }, true);
   document.addEventListener('dragstart', (e) => { if (e.target instanceof HTMLImageElement) e.preventDefault(); }, true);

@@ -10,20 +10,36 @@ from ..context import Workbench
 from ..browser_js import hide_inputs, pointer_marker
 from ..display import MAP_MODES
 from ..exact import parse_number
-from ..inspect import ZOOMS, Window, depth_range, edge_view, legend_html, zoom_window, zoomed
+from ..inspect import ZOOMS, Window, cropped, depth_range, edge_view, legend_html, zoom_window
 from ..overlay import COLOR_MODES, OverlayStyle, encode_jpeg, project_scene, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
 
-DISPLAY_WIDTH = 640  # px: about the overlay's width on the page at 1366x768; every frame is sent at this size
+DISPLAY_WIDTH = 640  # px: frames are sent at most this wide until the page reports its window size
 FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
 REST_QUALITIES = (92, 85, 78, 70, 62, 55, 48, 40)  # the frame at rest: the best of these within FRAME_BYTES
 PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAME_BYTES
-PANEL_WIDTH = 760  # px; the 3D view takes what is left between this panel and the controls
+PANEL_WIDTH = 760  # px at start; then from the window's width (see ``panel_layout``)
+CONTROLS_PX = 400  # about the width of the controls docked right (control_width="large")
+MIN_3D_PX = 220  # what the 3D view keeps between the overlay and the controls
+MAX_PANEL_SHARE = 0.6  # of the window's width
+
+
+def panel_layout(window_width: int) -> tuple[int, int]:
+    """(overlay panel width, frame width) in CSS px for a window ``window_width`` wide: the
+    overlay gets what the controls and a usable 3D view leave, up to 60 % of the window."""
+    panel = int(min(window_width - CONTROLS_PX - MIN_3D_PX, MAX_PANEL_SHARE * window_width))
+    panel = max(PANEL_WIDTH - 120, panel)
+    return panel, max(480, panel - 24)
 
 
 VIEWS = ("overlay", "edges")
+#: A zoomed window is sent at map resolution and magnified by the browser without smoothing.
+IMAGE_CSS = {
+    "fit": "<style>img[src^='blob:'] { width: 100% !important; }</style>",
+    "zoomed": "<style>img[src^='blob:'] { width: 100% !important; image-rendering: pixelated; }</style>",
+}
 EDGE_LEGEND = ("<div style='font-size:0.75em;padding:0 0.5em'><span style='color:#00c8ff'>■</span> map edges · "
                "<span style='color:#ff00c8'>■</span> depth edges of the projected points · "
                "<span style='color:#999'>■</span> white: both (aligned)</div>")
@@ -38,20 +54,25 @@ def _pair(text: str) -> tuple[float, float] | None:
     return None if a is None or b is None else (a, b)
 
 
-def jpeg_within(image: np.ndarray, max_bytes: int, qualities: tuple[int, ...]) -> tuple[bytes, int]:
-    """The JPEG of ``image`` at the best of ``qualities`` (highest first) that fits ``max_bytes``,
-    else at the lowest; found by bisection (at most ~log2(len) encodes of a display-sized frame,
-    ~1 ms each)."""
-    lo, hi = 0, len(qualities) - 1  # the answer's index lies in [lo, hi]
-    best: tuple[bytes, int] | None = None
-    while lo <= hi:
-        mid = (lo + hi) // 2
-        data = encode_jpeg(image, qualities[mid])
-        if len(data) <= max_bytes:
-            best, hi = (data, qualities[mid]), mid - 1
-        else:
-            lo = mid + 1
-    return best if best is not None else (encode_jpeg(image, qualities[-1]), qualities[-1])
+def jpeg_within(image: np.ndarray, max_bytes: int, qualities: tuple[int, ...]) -> tuple[np.ndarray, bytes, int]:
+    """(the image sent, its JPEG, the quality): the best of ``qualities`` (highest first) that
+    fits ``max_bytes``, found by bisection (~1 ms per encode of a display-sized frame); when
+    not even the lowest fits, the image is shrunk by steps of 0.8 until it does (or to 320 px)."""
+    while True:
+        lo, hi = 0, len(qualities) - 1  # the answer's index lies in [lo, hi]
+        best: tuple[bytes, int] | None = None
+        while lo <= hi:
+            mid = (lo + hi) // 2
+            data = encode_jpeg(image, qualities[mid])
+            if len(data) <= max_bytes:
+                best, hi = (data, qualities[mid]), mid - 1
+            else:
+                lo = mid + 1
+        if best is not None:
+            return image, *best
+        if image.shape[1] <= 320:
+            return image, encode_jpeg(image, qualities[-1]), qualities[-1]
+        image = display_sized(image, int(image.shape[1] * 0.8))
 
 
 def display_sized(image: np.ndarray, width: int = DISPLAY_WIDTH) -> np.ndarray:
@@ -87,8 +108,9 @@ class OverlayPanel:
         self.frame_quality = 0
         with self.panel.add_tab("Overlay"):
             # Stretch the overlay images to the panel's width (viser shows images at most at
-            # their own size; small maps would otherwise stay small).
-            gui.add_html("<style>img[src^='blob:'] { width: 100% !important; }</style>")
+            # their own size; small maps would otherwise stay small); zoomed windows without
+            # smoothing (see render)
+            self.image_css = gui.add_html(IMAGE_CSS["fit"])
             self.caption = gui.add_markdown("Loading...")
             gui.add_html(pointer_marker("Overlay pointer"))
             self.image = gui.add_image(
@@ -104,6 +126,7 @@ class OverlayPanel:
                                          hint="edges: map edges (cyan) against the points' depth edges (magenta); "
                                               "white where they agree")
             self.pointer = gui.add_text("Overlay pointer", "", hint="(set by clicks on the image)")
+            self.window_size = gui.add_text("Window size", "", hint="(set by the page: its window's size)")
             with gui.add_folder("Display"):
                 self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value="intensity",
                                                  hint="Colour the lidar points by their intensity or their depth")
@@ -115,7 +138,7 @@ class OverlayPanel:
                     "Map", MAP_MODES, initial_value="raw",
                     hint="raw: the accumulated map as recorded; smoothed: clipped and blurred as the MI sees it",
                 )
-            gui.add_html(hide_inputs([self.pointer]))
+            gui.add_html(hide_inputs([self.pointer, self.window_size]))
         self.compare_tab = self.panel.add_tab("Before / after")
         for handle in (self.color_by, self.point_size, self.opacity, self.contrast, self.map_mode, self.zoom,
                        self.view):
@@ -124,6 +147,8 @@ class OverlayPanel:
         self.window: Window | None = None  # the part of the map the last frame showed
         self.centre_in.on_update(self._on_centre_typed)
         self.pointer.on_update(self._on_pointer)
+        self.window_size.on_update(self._on_window_size)
+        self.display_width = DISPLAY_WIDTH  # frames are sent at most this wide
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
 
@@ -163,9 +188,12 @@ class OverlayPanel:
         else:
             image = self.draw(index, extrinsic, style)
         zoom = self.zoom.value
-        window = zoom_window(image.shape, zoom, self.centre, DISPLAY_WIDTH)
-        image = display_sized(image) if zoom == "fit" else zoomed(image, window, zoom)
-        data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES)
+        window = zoom_window(image.shape, zoom, self.centre, self.display_width)
+        image = display_sized(image, self.display_width) if zoom == "fit" else cropped(image, window)
+        css = IMAGE_CSS["fit" if zoom == "fit" else "zoomed"]
+        if self.image_css.content != css:
+            self.image_css.content = css
+        image, data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES)
         send_jpeg(self.image, image, data)
         self.window, self.rest_frame = window, rest
         self.frame_bytes, self.frame_quality = len(data), quality
@@ -176,6 +204,19 @@ class OverlayPanel:
             legend = EDGE_LEGEND
         if legend != self.legend.content:
             self.legend.content = legend
+
+    # --- layout --------------------------------------------------------------------------------
+    def _on_window_size(self, event) -> None:
+        """A page reported its window's size: give the overlay the space (the last report wins:
+        viser places panels for every tab at once)."""
+        parts = str(self.window_size.value).lower().split("x")
+        if event.client is None or len(parts) != 2 or not parts[0].strip().isdigit():
+            return
+        panel, frame = panel_layout(int(parts[0]))
+        if frame != self.display_width:
+            self.panel.set_width(panel)
+            self.display_width = frame
+            self.app.display_changed()
 
     # --- zoom and pan ------------------------------------------------------------------------
     def _on_pointer(self, event) -> None:
