@@ -242,3 +242,14 @@ def test_pnp_from_four_or_more_pairs_recovers_the_extrinsic():
     # picking: the ray from the origin through point 3 finds point 3
     assert nearest_point_to_ray(pts, (0, 0, 0), pts[3]) == 3
     assert nearest_point_to_ray(pts, (0, 0, 0), (0, 0, -1)) is None
+
+
+def test_panel_layout_gives_the_overlay_the_space_and_bounds_odd_reports():
+    from l2e_studio.app.panels.overlay_view import panel_layout
+
+    p1366, f1366 = panel_layout(1366)
+    p1920, f1920 = panel_layout(1920)
+    assert 700 <= p1366 <= 1366 - 400 - 200 and f1366 < p1366  # the 3D view keeps ~220 px
+    assert p1920 > p1366 and p1920 <= 0.6 * 1920 and f1920 < p1920
+    assert panel_layout(0) == panel_layout(320) and panel_layout(10**9) == panel_layout(8192)
+    assert panel_layout(800)[1] >= 480

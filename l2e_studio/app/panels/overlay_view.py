@@ -29,6 +29,7 @@ MAX_PANEL_SHARE = 0.6  # of the window's width
 def panel_layout(window_width: int) -> tuple[int, int]:
     """(overlay panel width, frame width) in CSS px for a window ``window_width`` wide: the
     overlay gets what the controls and a usable 3D view leave, up to 60 % of the window."""
+    window_width = min(max(int(window_width), 320), 8192)
     panel = int(min(window_width - CONTROLS_PX - MIN_3D_PX, MAX_PANEL_SHARE * window_width))
     panel = max(PANEL_WIDTH - 120, panel)
     return panel, max(480, panel - 24)
