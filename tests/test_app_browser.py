@@ -71,6 +71,21 @@ def open_app(page, app) -> None:
     page.goto(app.url)
     page.get_by_text("Use in optimisation").wait_for()
     page.locator("img[src^='blob:']").first.wait_for()
+    close_webgl_notice(page)
+
+
+def close_webgl_notice(page, wait_s: float = 2.0) -> None:
+    """Close viser's "WebGL is running in software mode" notice (headless Chromium has no GPU;
+    with the overlay panel widened for large windows the notice can lie over the tabs)."""
+    notice = page.locator(".mantine-Notification-root", has_text="WebGL")
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and notice.count() == 0:
+        time.sleep(0.1)
+    for n in notice.all():
+        try:
+            n.locator("button").first.click(timeout=2_000)
+        except Exception:  # closed by itself meanwhile
+            pass
 
 
 def overlay_digest(page) -> str:

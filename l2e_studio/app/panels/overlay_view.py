@@ -16,7 +16,7 @@ from ..readout import MiReading
 from ..state import Snapshot
 from ..text import num
 
-DISPLAY_WIDTH = 640  # px: frames are sent at most this wide until the page reports its window size
+DISPLAY_WIDTH = 640  # px: previews are at most this wide; frames at rest take the panel's width
 FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
 REST_QUALITIES = (92, 85, 78, 70, 62, 55, 48, 40)  # the frame at rest: the best of these within FRAME_BYTES
 PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAME_BYTES
@@ -55,10 +55,16 @@ def _pair(text: str) -> tuple[float, float] | None:
     return None if a is None or b is None else (a, b)
 
 
-def jpeg_within(image: np.ndarray, max_bytes: int, qualities: tuple[int, ...]) -> tuple[np.ndarray, bytes, int]:
+def jpeg_within(
+    image: np.ndarray, max_bytes: int, qualities: tuple[int, ...], width: int | None = None
+) -> tuple[np.ndarray, bytes, int]:
     """(the image sent, its JPEG, the quality): the best of ``qualities`` (highest first) that
-    fits ``max_bytes``, found by bisection (~1 ms per encode of a display-sized frame); when
-    not even the lowest fits, the image is shrunk by steps of 0.8 until it does (or to 320 px)."""
+    fits ``max_bytes``, found by bisection (~1-3 ms per encode of a display-sized frame). The
+    image is first shrunk to ``width`` (the width that fitted last time: consecutive frames are
+    alike); when not even the lowest quality fits, it is shrunk by steps of 0.8 until it does
+    (or to 320 px)."""
+    if width is not None:
+        image = display_sized(image, width)
     while True:
         lo, hi = 0, len(qualities) - 1  # the answer's index lies in [lo, hi]
         best: tuple[bytes, int] | None = None
@@ -150,6 +156,7 @@ class OverlayPanel:
         self.pointer.on_update(self._on_pointer)
         self.window_size.on_update(self._on_window_size)
         self.display_width = DISPLAY_WIDTH  # frames are sent at most this wide
+        self._fitted: dict[tuple, int | None] = {}  # the width the last frame of a kind fitted the budget at
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
 
@@ -173,9 +180,10 @@ class OverlayPanel:
         return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
 
     def render(self, snap: Snapshot, rest: bool = True) -> None:
-        """Draw the overlay and send it display-sized within ``FRAME_BYTES``: at the best quality
-        that fits when ``rest``, as a quicker, coarser preview while controls move. Zoomed
-        views are display-sized windows of the map at native resolution or magnified."""
+        """Draw the overlay and send it within ``FRAME_BYTES``: at rest (``rest``) at the panel's
+        width and the best quality that fits; while controls move, a quicker preview at most
+        ``DISPLAY_WIDTH`` wide. A zoomed view is a window of the map at map resolution, which
+        the browser magnifies without smoothing."""
         style = self.style()
         index, extrinsic = snap.selected, snap.shown_extrinsic
         disp = self.app.displays[index]
@@ -190,11 +198,17 @@ class OverlayPanel:
             image = self.draw(index, extrinsic, style)
         zoom = self.zoom.value
         window = zoom_window(image.shape, zoom, self.centre, self.display_width)
-        image = display_sized(image, self.display_width) if zoom == "fit" else cropped(image, window)
+        width = self.display_width if rest else min(self.display_width, DISPLAY_WIDTH)
+        image = display_sized(image, width) if zoom == "fit" else cropped(image, window)
         css = IMAGE_CSS["fit" if zoom == "fit" else "zoomed"]
         if self.image_css.content != css:
             self.image_css.content = css
-        image, data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES)
+        key = (rest, zoom, self.view.value, width)  # what the width that fitted last depends on
+        image, data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES,
+                                           self._fitted.get(key))
+        # remember a shrunk width (start there next time); a frame that fits at full width
+        # forgets it, so the next one tries full width again
+        self._fitted[key] = image.shape[1] if image.shape[1] < width * 0.99 else None
         send_jpeg(self.image, image, data)
         self.window, self.rest_frame = window, rest
         self.frame_bytes, self.frame_quality = len(data), quality
