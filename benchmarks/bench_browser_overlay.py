@@ -225,7 +225,7 @@ def main() -> None:
             real_select = app.select_scene
             app.select_scene = lambda i: (selected_at.append(time.time() * 1e3), real_select(i))[1]
             origin = page.evaluate("() => performance.timeOrigin")
-            reached = []
+            reached, queued = [], []
             for k in rng.choice(args.scenes, size=min(10, args.scenes), replace=False):
                 name = f"scene_{int(k):03d}"
                 cell = page.locator("td", has_text=name).first
@@ -241,13 +241,16 @@ def main() -> None:
                         click_lat.append(frames[0][0] - t_click)
                         if selected_at:
                             reached.append(selected_at[-1] - (origin + t_click))
+                            q = first_after(np.array(QUEUED), selected_at[-1])
+                            queued.append(np.nan if q is None else q - selected_at[-1])
                         break
                     time.sleep(0.01)
             if click_lat:
                 cl = np.array(click_lat)
                 print(f"table row click -> that scene's overlay shown: median {np.median(cl):.0f} ms, max {cl.max():.0f} ms "
                       f"({cl.size} clicks, {args.scenes} rows); the click reached the server after "
-                      f"{np.median(reached) if reached else float('nan'):.0f} ms (median)")
+                      f"{np.median(reached) if reached else float('nan'):.0f} ms, its frame was queued "
+                      f"{np.nanmedian(queued) if queued else float('nan'):.0f} ms after that (medians)")
             srv = np.array(app.overlay_seconds[-50:]) * 1e3
             print(f"  server render+encode per frame: median {np.median(srv):.0f} ms")
             sl = np.array(server_lat) * 1e3
