@@ -133,6 +133,8 @@ class CalibrationResult:
     message: str = ""
     stages: tuple[Stage, ...] = ()  # the schedule that ran
     objective: str = "mi"  # the score climbed and reported in ``score_*``
+    #: where each start of the global search ended, with its final score (empty without it)
+    ends: tuple[tuple[Extrinsic, float], ...] = ()
 
 
 class _Cancelled(Exception):
@@ -205,6 +207,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         message=message,
         stages=run.stages,
         objective=stack.objective_name,
+        ends=run.ends,
     )
 
 
@@ -238,7 +241,8 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
             ends.append(run.climb(start, stages[first:], first=first))
             if run.cancelled:
                 break
-        run.end = max(ends, key=lambda e: final.score(e, per_scene=False)[0])
+        run.ends = tuple((e, final.score(e, per_scene=False)[0]) for e in ends)
+        run.end = max(run.ends, key=lambda es: es[1])[0]
     else:
         run.end = run.climb(seed, stages)
     return run
@@ -286,6 +290,7 @@ class _Run:
         self.cancelled = False
         self.message = ""
         self.end = seed  # where the search ended (set by _search)
+        self.ends: tuple[tuple[Extrinsic, float], ...] = ()  # every start's end and final score
 
     def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0) -> Extrinsic:
         """Climb ``stages`` (numbered from ``first``) from ``start``; the best point reached."""

@@ -52,6 +52,8 @@ OBSERVABLE_DROP = {"edges": 0.1, "mi": 0.02}
 EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distance (at 1280 px wide)
 SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
 MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
+RIVAL_DEG = 2.0  # another start's end this far (or further) from the result ...
+RIVAL_SHARE = 0.9  # ... with this share of its score (or more) is a second answer: the data cannot tell
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
 
 
@@ -190,6 +192,9 @@ def judge(
     final = stack.with_sigma(settings.sigma)
     second = second_score(final)
     checks = evidence(final, seed, res, settings, second, cancel)
+    rival = rival_check(result)
+    if rival is not None:
+        checks.append(rival)
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
     if not failed:
@@ -202,7 +207,8 @@ def judge(
         if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0]
                for h in (final, *(final.select(m) for m in halves(final, seed)))):
             return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0)
-    if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only:
+    if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
+            (rival is None or rival.passed):
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
         # fit the rotation to it (near the result's), and judge that rotation afresh.
         rotation = replace(settings, rotation_only=True)
@@ -219,6 +225,22 @@ def judge(
         checks += rot_checks
     keep = on_untrusted == "keep-seed"
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
+
+
+def rival_check(result: CalibrationResult) -> Check | None:
+    """With a global search: no other start may end far away (``RIVAL_DEG``) with nearly the
+    result's score (``RIVAL_SHARE``). Two distinct peaks scored alike mean the scenes cannot
+    tell them apart, whichever the final score happens to pick (None without a global search)."""
+    res, score = result.extrinsic, result.score_result
+    others = [(e.error_to(res)[0], s) for e, s in result.ends]
+    if len(others) < 2 or not np.isfinite(score) or score <= 0:
+        return None
+    far = [(deg, s / score) for deg, s in others if deg >= RIVAL_DEG]
+    worst = max(far, key=lambda ds: ds[1], default=None)
+    passed = worst is None or worst[1] < RIVAL_SHARE
+    detail = ("no other start ended near its score" if worst is None else
+              f"the best of the other starts' ends {worst[0]:.1f} deg away scores {100 * worst[1]:.0f} % of it")
+    return Check("a single peak", passed, detail + f" (limit {100 * RIVAL_SHARE:.0f} % beyond {RIVAL_DEG:g} deg)")
 
 
 def evidence(

@@ -154,3 +154,23 @@ def test_edge_agreement_and_edge_score_take_points_on_the_image_border():
     assert np.isfinite(total) and np.isfinite(per).all()
     pix = stack.pixels(ident)
     assert pix.max() < 64 * 48 and (pix >= -1).all()
+
+
+def test_a_rival_peak_nearly_as_high_makes_the_answer_ambiguous():
+    """Two starts ending far apart with nearly the same score: the data cannot tell them apart,
+    whichever the final score picked; ends near the result, or far but clearly lower, are fine."""
+    from dataclasses import replace as dc_replace
+
+    from l2e_studio.calibrate import CalibrationResult
+    from l2e_studio.verdict import RIVAL_DEG, rival_check
+
+    res = Extrinsic(np.zeros(3), np.zeros(3))
+    far = Extrinsic(np.radians([0.0, 0.0, 2.5 * RIVAL_DEG]), np.zeros(3))
+    near = Extrinsic(np.radians([0.0, 0.3, 0.0]), np.zeros(3))
+    base = CalibrationResult(res, far, CalibrationSettings(), ["a"], 0.5, 1.0, np.zeros(1), np.zeros(1), 10, 1.0,
+                             objective="edges")
+    assert rival_check(base) is None  # no global search: nothing to compare
+    assert not rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.95)))).passed
+    assert rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6), (near, 0.99)))).passed
+    check = rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.93))))
+    assert "93 %" in check.detail and f"{2.5 * RIVAL_DEG:.1f} deg" in check.detail
