@@ -3,6 +3,7 @@ ranges, settings checks (no browser, no server)."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -253,3 +254,17 @@ def test_panel_layout_gives_the_overlay_the_space_and_bounds_odd_reports():
     assert p1920 > p1366 and p1920 <= 0.6 * 1920 and f1920 < p1920
     assert panel_layout(0) == panel_layout(320) and panel_layout(10**9) == panel_layout(8192)
     assert panel_layout(800)[1] >= 480
+
+
+def test_frames_fit_the_byte_budget_at_the_best_quality_or_smaller():
+    from l2e_studio.app.panels.overlay_view import REST_QUALITIES, jpeg_within
+
+    smooth = np.tile(np.linspace(0, 255, 720, dtype=np.float32)[:, None, None], (1, 1280, 3)).astype(np.uint8)
+    img, data, q = jpeg_within(smooth, 60_000, REST_QUALITIES)
+    assert q == REST_QUALITIES[0] and img.shape == smooth.shape and len(data) <= 60_000
+    noise = np.random.default_rng(0).integers(0, 256, (720, 1280, 3), dtype=np.uint8)
+    img, data, q = jpeg_within(noise, 60_000, REST_QUALITIES)
+    assert len(data) <= 60_000 and img.shape[1] < 1280 and q in REST_QUALITIES  # shrunk to fit
+    assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR).shape == img.shape
+    hinted, _, _ = jpeg_within(noise, 60_000, REST_QUALITIES, width=img.shape[1])
+    assert hinted.shape == img.shape  # the width that fitted last time: no wider attempt first
