@@ -23,6 +23,7 @@ PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAM
 PANEL_WIDTH = 760  # px at start; then from the window's width (see ``panel_layout``)
 CONTROLS_PX = 400  # about the width of the controls docked right (control_width="large")
 MIN_3D_PX = 220  # what the 3D view keeps between the overlay and the controls
+MIN_PANEL_PX = 640  # the overlay panel never narrower than this
 MAX_PANEL_SHARE = 0.6  # of the window's width
 
 
@@ -31,7 +32,7 @@ def panel_layout(window_width: int) -> tuple[int, int]:
     overlay gets what the controls and a usable 3D view leave, up to 60 % of the window."""
     window_width = min(max(int(window_width), 320), 8192)
     panel = int(min(window_width - CONTROLS_PX - MIN_3D_PX, MAX_PANEL_SHARE * window_width))
-    panel = max(PANEL_WIDTH - 120, panel)
+    panel = max(MIN_PANEL_PX, panel)
     return panel, max(480, panel - 24)
 
 
@@ -199,16 +200,19 @@ class OverlayPanel:
         zoom = self.zoom.value
         window = zoom_window(image.shape, zoom, self.centre, self.display_width)
         width = self.display_width if rest else min(self.display_width, DISPLAY_WIDTH)
-        image = display_sized(image, width) if zoom == "fit" else cropped(image, window)
+        if zoom != "fit":
+            image = cropped(image, window)
+        full = min(width, image.shape[1]) if zoom == "fit" else image.shape[1]  # before the byte budget
         css = IMAGE_CSS["fit" if zoom == "fit" else "zoomed"]
         if self.image_css.content != css:
             self.image_css.content = css
         key = (rest, zoom, self.view.value, width)  # what the width that fitted last depends on
+        # one resize, straight to the width that fitted last time (or to the full width)
         image, data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES,
-                                           self._fitted.get(key))
+                                           self._fitted.get(key) or full)
         # remember a shrunk width (start there next time); a frame that fits at full width
         # forgets it, so the next one tries full width again
-        self._fitted[key] = image.shape[1] if image.shape[1] < width * 0.99 else None
+        self._fitted[key] = image.shape[1] if image.shape[1] < full else None
         send_jpeg(self.image, image, data)
         self.window, self.rest_frame = window, rest
         self.frame_bytes, self.frame_quality = len(data), quality
