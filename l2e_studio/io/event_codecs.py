@@ -187,7 +187,7 @@ def concat(pieces: list[Events]) -> Events:
 
 def decode_mono(data: bytes | np.ndarray, time_base_ns: int) -> Events:
     """Events of a ``mono`` EventPacket payload (times in us)."""
-    w = np.frombuffer(bytes(data), "<u8", len(data) // 8)
+    w = np.frombuffer(data, "<u8", len(data) // 8)
     t_ns = np.int64(time_base_ns) + (w & np.uint64(0xFFFFFFFF)).astype(np.int64)
     return (((w >> np.uint64(32)) & np.uint64(0xFFFF)).astype(np.uint16),
             ((w >> np.uint64(48)) & np.uint64(0x7FFF)).astype(np.uint16),
@@ -196,7 +196,7 @@ def decode_mono(data: bytes | np.ndarray, time_base_ns: int) -> Events:
 
 def decode_libcaer(data: bytes | np.ndarray, time_base_ns: int) -> Events:
     """Events of a ``libcaer`` EventPacket payload (times in us)."""
-    rec = np.frombuffer(bytes(data), np.dtype([("d", "<u4"), ("t", "<i4")]), len(data) // 8)
+    rec = np.frombuffer(data, np.dtype([("d", "<u4"), ("t", "<i4")]), len(data) // 8)
     d, t_us = rec["d"], rec["t"].astype(np.int64)
     rollovers = np.concatenate([[0], np.cumsum(t_us[1:] < t_us[:-1])]) if t_us.size else t_us
     t_ns = np.int64(time_base_ns) + 1000 * (t_us + (rollovers << 31))
