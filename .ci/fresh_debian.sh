@@ -36,6 +36,9 @@ start = next(i for i, ln in enumerate(lines) if ln.startswith(f"# {sys.argv[2]}.
 print(next(ln for ln in lines[start + 1:] if ln and not ln.startswith("#")))
 EOF
 }
+# How pip reaches PyPI here: a CA bundle (PIP_CERT or pip.conf's cert, e.g. for a TLS-inspecting
+# proxy) is copied in and named by PIP_CERT; index, timeout and proxy variables are passed on.
+PIP_CA=${PIP_CERT:-$(python3 -c 'import configparser; c = configparser.ConfigParser(); c.read(["/etc/pip.conf", "/etc/xdg/pip/pip.conf"]); print(c.get("global", "cert", fallback=""))')}
 CMD0=$(readme_command 0)
 CMD1=$(readme_command 1)
 CMD2=$(readme_command 2)
@@ -61,17 +64,18 @@ trap cleanup EXIT
 elapsed() { echo $(( $(date +%s) - $1 )); }
 say() { echo "[fresh-debian $(date -u +%H:%M:%S)] $*" | tee -a "$LOG/summary.txt"; }
 in_root() { chroot "$ROOT" /usr/bin/env -i HOME=/root TERM=dumb LANG=C.UTF-8 PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    ${PIP_INDEX_URL:+PIP_INDEX_URL=$PIP_INDEX_URL} ${PIP_DEFAULT_TIMEOUT:+PIP_DEFAULT_TIMEOUT=$PIP_DEFAULT_TIMEOUT} \
+    ${PIP_CA:+PIP_CERT=/etc/ssl/host-pip-ca.crt} ${PIP_INDEX_URL:+PIP_INDEX_URL=$PIP_INDEX_URL} ${PIP_DEFAULT_TIMEOUT:+PIP_DEFAULT_TIMEOUT=$PIP_DEFAULT_TIMEOUT} \
     ${http_proxy:+http_proxy=$http_proxy} ${https_proxy:+https_proxy=$https_proxy} ${no_proxy:+no_proxy=$no_proxy} \
     DEBIAN_FRONTEND=noninteractive bash -c "$1"; }
 size_mb() { du -sxm "$1" | awk '{print $1}'; }
 
-say "root $ROOT, mirror $MIRROR, repo $(git -C "$REPO" rev-parse --short HEAD)"
+say "root $ROOT, mirror $MIRROR, pip CA bundle ${PIP_CA:-none}"
 t=$(date +%s)
 debootstrap --variant=minbase bookworm "$ROOT" "$MIRROR" >"$LOG/debootstrap.txt" 2>&1 \
     || { tail -20 "$LOG/debootstrap.txt"; exit 1; }
 say "debootstrap minbase: $(elapsed $t) s, $(size_mb "$ROOT") MB"
 cp /etc/resolv.conf "$ROOT/etc/resolv.conf"
+if [ -n "$PIP_CA" ]; then mkdir -p "$ROOT/etc/ssl"; cp "$PIP_CA" "$ROOT/etc/ssl/host-pip-ca.crt"; fi
 mount -t proc proc "$ROOT/proc"
 mount -t sysfs sys "$ROOT/sys"
 mount --bind /dev "$ROOT/dev"
@@ -89,6 +93,7 @@ say "command 0 ($CMD0): $(elapsed $t) s, +$(( $(size_mb "$ROOT") - BASE )) MB"
 
 mkdir -p "$ROOT/root/l2e-studio"
 git -C "$REPO" archive HEAD | tar -x -C "$ROOT/root/l2e-studio"
+say "repository at $(git -C "$REPO" rev-parse --short HEAD) copied in (git archive HEAD)"
 BASE=$(size_mb "$ROOT")
 
 # Command 1: it installs, then the server answers on 127.0.0.1:8080; then it is stopped.

@@ -51,47 +51,54 @@ _Y, _BASE_X, _POL, _WRAPS, _HIGH, _LOW, _LAST_RAW_HIGH = range(7)
 @numba.njit(**_JIT)
 def _evt3_kernel(w, i, state, xo, yo, to, po):
     """Decode ``w[i:]`` into the outputs until the words end or fewer than 12 slots are left;
-    returns (next word, events written)."""
+    returns (next word, events written). Words go in blocks that cannot overflow the outputs
+    (at most 12 events a word), so the inner loop checks nothing but the word type."""
     y, bx, pol = state[_Y], state[_BASE_X], state[_POL]
     wraps, high, low, last = state[_WRAPS], state[_HIGH], state[_LOW], state[_LAST_RAW_HIGH]
     t = (high << 12) | low
     n = 0
-    limit = xo.size - 12
     nw = w.size
-    while i < nw and n <= limit:
-        word = np.int64(w[i])
-        i += 1
-        kind = word >> 12
-        pay = word & 0xFFF
-        if kind == 0x0:
-            y = pay & 0x7FF
-        elif kind == 0x2:
-            xo[n] = np.uint16(pay & 0x7FF)
-            yo[n] = np.uint16(y)
-            to[n] = t
-            po[n] = np.uint8((pay >> 11) & 1)
-            n += 1
-        elif kind == 0x3:
-            bx = pay & 0x7FF
-            pol = (pay >> 11) & 1
-        elif kind == 0x4 or kind == 0x5:
-            nbits = 12 if kind == 0x4 else 8
-            for b in range(nbits):  # write every slot, keep the set bits: no branch in the loop
-                xo[n] = np.uint16((bx + b) & 0xFFFF)
+    while i < nw:
+        stop = min(nw, i + (xo.size - n) // 12)
+        if stop <= i:
+            break
+        for j in range(i, stop):
+            word = np.int64(w[j])
+            kind = word >> 12
+            pay = word & 0xFFF
+            if kind == 0x2:  # the most frequent word first
+                xo[n] = np.uint16(pay & 0x7FF)
                 yo[n] = np.uint16(y)
                 to[n] = t
-                po[n] = np.uint8(pol)
-                n += (pay >> b) & 1
-            bx += nbits
-        elif kind == 0x6:
-            low = pay
-            t = (high << 12) | low
-        elif kind == 0x8:
-            if last >= 0 and pay < last:
-                wraps += 1
-            last = pay
-            high = wraps * 4096 + pay
-            t = (high << 12) | low
+                po[n] = np.uint8((pay >> 11) & 1)
+                n += 1
+            elif kind == 0x0:
+                y = pay & 0x7FF
+            elif kind == 0x4 or kind == 0x5:
+                m = pay if kind == 0x4 else pay & 0xFF
+                x = bx
+                while m:  # every slot up to the highest set bit written, the set ones kept
+                    xo[n] = np.uint16(x & 0xFFFF)
+                    yo[n] = np.uint16(y)
+                    to[n] = t
+                    po[n] = np.uint8(pol)
+                    n += m & 1
+                    m >>= 1
+                    x += 1
+                bx += 12 if kind == 0x4 else 8
+            elif kind == 0x3:
+                bx = pay & 0x7FF
+                pol = (pay >> 11) & 1
+            elif kind == 0x6:
+                low = pay
+                t = (high << 12) | low
+            elif kind == 0x8:
+                if last >= 0 and pay < last:
+                    wraps += 1
+                last = pay
+                high = wraps * 4096 + pay
+                t = (high << 12) | low
+        i = stop
     state[_Y], state[_BASE_X], state[_POL] = y, bx, pol
     state[_WRAPS], state[_HIGH], state[_LOW], state[_LAST_RAW_HIGH] = wraps, high, low, last
     return i, n
@@ -103,11 +110,9 @@ def _evt2_kernel(w, i, state, xo, yo, to, po):
     (next word, events written). ``state[0]``: the last TIME_HIGH."""
     high = state[0]
     n = 0
-    cap = xo.size
-    nw = w.size
-    while i < nw and n < cap:
-        word = np.int64(w[i])
-        i += 1
+    stop = min(w.size, i + xo.size)  # at most one event a word
+    for j in range(i, stop):
+        word = np.int64(w[j])
         kind = word >> 28
         if kind <= 0x1:
             xo[n] = np.uint16((word >> 11) & 0x7FF)
@@ -118,7 +123,7 @@ def _evt2_kernel(w, i, state, xo, yo, to, po):
         elif kind == 0x8:
             high = word & 0x0FFFFFFF
     state[0] = high
-    return i, n
+    return stop, n
 
 
 class _WordDecoder:
@@ -126,17 +131,15 @@ class _WordDecoder:
 
     _kernel = None
     _dtype = "<u2"
-    _state_size = 1
+    _per_word = 1  # the most events one word holds
 
     def __init__(self, capacity: int = DEFAULT_CAPACITY) -> None:
         self.state = self._initial_state()
         self.capacity = max(int(capacity), 64)
-        self._out = (np.empty(self.capacity, np.uint16), np.empty(self.capacity, np.uint16),
-                     np.empty(self.capacity, np.int64), np.empty(self.capacity, np.uint8))
         self._tail = b""  # bytes of a word cut by the previous call
 
     def _initial_state(self) -> np.ndarray:
-        return np.zeros(self._state_size, np.int64)
+        return np.zeros(1, np.int64)
 
     def decode(self, words: np.ndarray) -> Iterator[Events]:
         """Yield the events of ``words`` (this encoding's word dtype) in pieces of at most
@@ -144,9 +147,12 @@ class _WordDecoder:
         words = np.ascontiguousarray(words, dtype=self._dtype)
         i = 0
         while i < words.size:
-            i, n = type(self)._kernel(words, i, self.state, *self._out)
-            if n:
-                yield tuple(a[:n].copy() for a in self._out)  # type: ignore[misc]
+            size = max(64, min(self.capacity, self._per_word * (words.size - i) + self._per_word))
+            out = (np.empty(size, np.uint16), np.empty(size, np.uint16), np.empty(size, np.int64),
+                   np.empty(size, np.uint8))
+            i, n = type(self)._kernel(words, i, self.state, *out)
+            if n:  # fresh buffers handed out as they are (a copy costs a third of the decoding), unless mostly empty
+                yield tuple(a[:n] if 2 * n >= size else a[:n].copy() for a in out)  # type: ignore[misc]
 
     def decode_bytes(self, data: bytes | np.ndarray) -> Iterator[Events]:
         """:meth:`decode` of a byte string; a word cut at the end is kept for the next call."""
@@ -162,6 +168,7 @@ class Evt3Decoder(_WordDecoder):
 
     _kernel = _evt3_kernel
     _dtype = "<u2"
+    _per_word = 12
 
     def _initial_state(self) -> np.ndarray:
         state = np.zeros(7, np.int64)
@@ -174,6 +181,7 @@ class Evt2Decoder(_WordDecoder):
 
     _kernel = _evt2_kernel
     _dtype = "<u4"
+    _per_word = 1
 
 
 def concat(pieces: list[Events]) -> Events:
