@@ -27,7 +27,7 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
-from .event_packets import PACKET_TYPE, PacketError, PacketStream, register_packet_type
+from .event_packets import PACKET_TYPE, PacketError, PacketStream, packet_types
 
 EVENT_MSG = """std_msgs/Header header
 uint32 height
@@ -51,15 +51,17 @@ _PF_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: 
 
 def register_event_types(typestore) -> None:
     """Add the dvs_msgs and prophesee_event_msgs Event/EventArray and the event_camera_msgs
-    EventPacket definitions to ``typestore``."""
+    EventPacket definitions to ``typestore``; a family the store already defines otherwise (a
+    bag's own definitions) keeps its definition."""
     from rosbags.typesys import get_types_from_msg
 
-    types = {}
-    for pkg in EVENT_PACKAGES:
-        types.update(get_types_from_msg(EVENT_ELEM, f"{pkg}/msg/Event"))
-        types.update(get_types_from_msg(EVENT_MSG.format(pkg=pkg), f"{pkg}/msg/EventArray"))
-    typestore.register(types)
-    register_packet_type(typestore)
+    families = [{**get_types_from_msg(EVENT_ELEM, f"{pkg}/msg/Event"),
+                 **get_types_from_msg(EVENT_MSG.format(pkg=pkg), f"{pkg}/msg/EventArray")} for pkg in EVENT_PACKAGES]
+    for types in (*families, packet_types()):
+        try:
+            typestore.register(types)
+        except Exception:  # rosbags' TypesysError: defined differently already
+            pass
 
 
 def make_typestore(ros2: bool = False):
@@ -103,10 +105,7 @@ def _open(paths: Iterable[Path]):
         raise InputError(paths[0] if len(paths) == 1 else None,
                          f"cannot open as a ROS 1/2 bag ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
     # Bags carry their own message definitions; make sure ours are known for ROS 2 bags without them.
-    try:
-        register_event_types(reader.typestore if hasattr(reader, "typestore") else store)
-    except Exception:  # already registered (same definitions)
-        pass
+    register_event_types(reader.typestore if hasattr(reader, "typestore") else store)
     return reader
 
 

@@ -40,11 +40,11 @@ _REFUSED = {
 }
 
 
-def register_packet_type(typestore) -> None:
-    """Add EventPacket to a rosbags typestore."""
+def packet_types() -> dict:
+    """EventPacket's definition, as rosbags' typestores register it."""
     from rosbags.typesys import get_types_from_msg
 
-    typestore.register(get_types_from_msg(PACKET_MSG, PACKET_TYPE))
+    return get_types_from_msg(PACKET_MSG, PACKET_TYPE)
 
 
 class PacketError(ValueError):
