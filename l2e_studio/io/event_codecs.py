@@ -136,6 +136,7 @@ class _WordDecoder:
     def __init__(self, capacity: int = DEFAULT_CAPACITY) -> None:
         self.state = self._initial_state()
         self.capacity = max(int(capacity), 64)
+        self._ratio = 1.0  # events per word so far
         self._tail = b""  # bytes of a word cut by the previous call
 
     def _initial_state(self) -> np.ndarray:
@@ -147,11 +148,17 @@ class _WordDecoder:
         words = np.ascontiguousarray(words, dtype=self._dtype)
         i = 0
         while i < words.size:
-            size = max(64, min(self.capacity, self._per_word * (words.size - i) + self._per_word))
+            # Outputs sized for the events per word seen so far: fresh buffers are handed out as
+            # they are (a copy costs a third of the decoding); one that came out mostly empty is copied.
+            left = words.size - i
+            guess = int(left * self._ratio * 1.05) + self._per_word
+            size = max(64, min(self.capacity, self._per_word * left + self._per_word, guess))
             out = (np.empty(size, np.uint16), np.empty(size, np.uint16), np.empty(size, np.int64),
                    np.empty(size, np.uint8))
+            start = i
             i, n = type(self)._kernel(words, i, self.state, *out)
-            if n:  # fresh buffers handed out as they are (a copy costs a third of the decoding), unless mostly empty
+            self._ratio = max(n / max(i - start, 1), 0.01)
+            if n:
                 yield tuple(a[:n] if 2 * n >= size else a[:n].copy() for a in out)  # type: ignore[misc]
 
     def decode_bytes(self, data: bytes | np.ndarray) -> Iterator[Events]:
