@@ -130,7 +130,7 @@ class _WordDecoder:
     """A stateful decoder of one word stream; :meth:`decode` may be fed any split of the stream."""
 
     _kernel = None
-    _dtype = "<u2"
+    word_dtype = "<u2"
     _per_word = 1  # the most events one word holds
 
     def __init__(self, capacity: int = DEFAULT_CAPACITY) -> None:
@@ -145,7 +145,7 @@ class _WordDecoder:
     def decode(self, words: np.ndarray) -> Iterator[Events]:
         """Yield the events of ``words`` (this encoding's word dtype) in pieces of at most
         ``capacity`` events; the state carries over to the next call."""
-        words = np.ascontiguousarray(words, dtype=self._dtype)
+        words = np.ascontiguousarray(words, dtype=self.word_dtype)
         i = 0
         while i < words.size:
             # Outputs sized for the events per word seen so far: fresh buffers are handed out as
@@ -163,18 +163,18 @@ class _WordDecoder:
 
     def decode_bytes(self, data: bytes | np.ndarray) -> Iterator[Events]:
         """:meth:`decode` of a byte string; a word cut at the end is kept for the next call."""
-        size = np.dtype(self._dtype).itemsize
+        size = np.dtype(self.word_dtype).itemsize
         buf = self._tail + bytes(data) if self._tail else data
         usable = len(buf) - len(buf) % size
         self._tail = bytes(buf[usable:])
-        return self.decode(np.frombuffer(buf, self._dtype, usable // size))
+        return self.decode(np.frombuffer(buf, self.word_dtype, usable // size))
 
 
 class Evt3Decoder(_WordDecoder):
     """EVT 3.0, 16-bit words."""
 
     _kernel = _evt3_kernel
-    _dtype = "<u2"
+    word_dtype = "<u2"
     _per_word = 12
 
     def _initial_state(self) -> np.ndarray:
@@ -187,7 +187,7 @@ class Evt2Decoder(_WordDecoder):
     """EVT 2.0, 32-bit words."""
 
     _kernel = _evt2_kernel
-    _dtype = "<u4"
+    word_dtype = "<u4"
     _per_word = 1
 
 

@@ -115,23 +115,23 @@ def decode_evt2(path: Path, header: Header, chunk_words: int) -> Iterator[tuple[
     """Yield (x, y, t_us, p) arrays for successive chunks of an EVT 2.0 stream."""
     from .event_codecs import Evt2Decoder
 
-    yield from _decode_words(path, header, chunk_words, Evt2Decoder(chunk_words), "<u4")
+    yield from _decode_words(path, header, chunk_words, Evt2Decoder(chunk_words))
 
 
 def decode_evt3(path: Path, header: Header, chunk_words: int) -> Iterator[tuple[np.ndarray, ...]]:
     """Yield (x, y, t_us, p) arrays for successive chunks of an EVT 3.0 stream."""
     from .event_codecs import Evt3Decoder
 
-    yield from _decode_words(path, header, chunk_words, Evt3Decoder(chunk_words), "<u2")
+    yield from _decode_words(path, header, chunk_words, Evt3Decoder(chunk_words))
 
 
-def _decode_words(path: Path, header: Header, chunk_words: int, decoder, dtype: str):
+def _decode_words(path: Path, header: Header, chunk_words: int, decoder):
     """The file's words, ``chunk_words`` at a time, through one stateful decoder (pieces of at
     most ``chunk_words`` events: memory is flat in the file's length)."""
     with open(path, "rb") as f:
         f.seek(header.data_offset)
         while True:
-            w = _read_words(f, dtype, chunk_words)
+            w = _read_words(f, decoder.word_dtype, chunk_words)
             if w.size == 0:
                 return
             yield from decoder.decode(w)
