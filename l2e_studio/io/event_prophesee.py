@@ -126,15 +126,17 @@ def decode_evt3(path: Path, header: Header, chunk_words: int) -> Iterator[tuple[
 
 
 def _decode_words(path: Path, header: Header, chunk_words: int, decoder):
-    """The file's words, ``chunk_words`` at a time, through one stateful decoder (pieces of at
-    most ``chunk_words`` events: memory is flat in the file's length)."""
+    """The file's words, ``chunk_words`` at a time (read into one reused buffer: the decoder keeps
+    none of it), through one stateful decoder; memory is flat in the file's length."""
+    words = np.empty(max(int(chunk_words), 1), decoder.word_dtype)
+    raw = memoryview(words).cast("B")
     with open(path, "rb") as f:
         f.seek(header.data_offset)
         while True:
-            w = _read_words(f, decoder.word_dtype, chunk_words)
-            if w.size == 0:
+            got = f.readinto(raw)
+            if not got:
                 return
-            yield from decoder.decode(w)
+            yield from decoder.decode(words[: got // words.itemsize])
 
 
 def decode_dat(path: Path, header: Header, chunk_events: int) -> Iterator[tuple[np.ndarray, ...]]:
