@@ -1,6 +1,7 @@
 """``l2e-studio extract BAG... --out DIR``: scenes from ROS 1 / ROS 2 bags, no ROS needed.
 
-Reads dvs_msgs/EventArray or prophesee_event_msgs/EventArray (``--event-topic``) and
+Reads dvs_msgs/EventArray, prophesee_event_msgs/EventArray or event_camera_msgs/EventPacket
+(metavision_driver / libcaer_driver; encodings evt3, mono, libcaer) (``--event-topic``) and
 sensor_msgs/PointCloud2 (``--lidar-topic``); when a bag has exactly one topic of a kind it is
 used, otherwise the topics are listed and the command asks for a choice. Writes
 ``DIR/event/<stem>.png`` (accumulated map: every event over ``--window`` s, clipped to 127)
@@ -23,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bags", nargs="+", type=Path, metavar="BAG", help="ROS 1 .bag files or ROS 2 bag folders")
     parser.add_argument("--out", type=Path, metavar="DIR", help="scene folder to write (event/, lidar/)")
     parser.add_argument("--list", action="store_true", help="list the topics of each bag and exit")
-    parser.add_argument("--event-topic", metavar="TOPIC", help="dvs_msgs or prophesee_event_msgs EventArray topic")
+    parser.add_argument("--event-topic", metavar="TOPIC", help="dvs_msgs / prophesee_event_msgs EventArray or event_camera_msgs EventPacket "
+                             "(evt3, mono, libcaer) topic")
     parser.add_argument("--lidar-topic", metavar="TOPIC", help="sensor_msgs/PointCloud2 topic")
     parser.add_argument("--slice", type=float, default=None, metavar="S",
                         help="one scene per S seconds of bag time (default: one scene per bag)")

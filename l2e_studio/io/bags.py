@@ -1,7 +1,9 @@
 """Scenes from ROS 1 / ROS 2 bags, without a ROS install (pure-Python ``rosbags``).
 
-Event topics: ``dvs_msgs/EventArray`` (rpg_dvs_ros) and ``prophesee_event_msgs/EventArray``
-(prophesee_ros_wrapper); their definitions are registered in the typestore here. Lidar topics:
+Event topics: ``dvs_msgs/EventArray`` (rpg_dvs_ros), ``prophesee_event_msgs/EventArray``
+(prophesee_ros_wrapper) and ``event_camera_msgs/EventPacket`` (metavision_driver, libcaer_driver:
+the camera's own encoding, decoded by :mod:`l2e_studio.io.event_packets`); their definitions are
+registered in the typestore here. Lidar topics:
 ``sensor_msgs/PointCloud2`` (fields decoded with numpy; intensity field chosen by name).
 A ``sensor_msgs/CameraInfo`` topic, when one is found, is written as ``camera.yaml``.
 
@@ -25,6 +27,7 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
+from .event_packets import PACKET_TYPE, PacketError, PacketStream, packet_types
 
 EVENT_MSG = """std_msgs/Header header
 uint32 height
@@ -37,7 +40,8 @@ time ts
 bool polarity
 """
 EVENT_PACKAGES = ("dvs_msgs", "prophesee_event_msgs")
-EVENT_TYPES = tuple(f"{pkg}/msg/EventArray" for pkg in EVENT_PACKAGES)
+ARRAY_TYPES = tuple(f"{pkg}/msg/EventArray" for pkg in EVENT_PACKAGES)
+EVENT_TYPES = (*ARRAY_TYPES, PACKET_TYPE)
 CLOUD_TYPE = "sensor_msgs/msg/PointCloud2"
 INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 
@@ -46,14 +50,18 @@ _PF_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: 
 
 
 def register_event_types(typestore) -> None:
-    """Add the dvs_msgs and prophesee_event_msgs Event/EventArray definitions to ``typestore``."""
+    """Add the dvs_msgs and prophesee_event_msgs Event/EventArray and the event_camera_msgs
+    EventPacket definitions to ``typestore``; a family the store already defines otherwise (a
+    bag's own definitions) keeps its definition."""
     from rosbags.typesys import get_types_from_msg
 
-    types = {}
-    for pkg in EVENT_PACKAGES:
-        types.update(get_types_from_msg(EVENT_ELEM, f"{pkg}/msg/Event"))
-        types.update(get_types_from_msg(EVENT_MSG.format(pkg=pkg), f"{pkg}/msg/EventArray"))
-    typestore.register(types)
+    families = [{**get_types_from_msg(EVENT_ELEM, f"{pkg}/msg/Event"),
+                 **get_types_from_msg(EVENT_MSG.format(pkg=pkg), f"{pkg}/msg/EventArray")} for pkg in EVENT_PACKAGES]
+    for types in (*families, packet_types()):
+        try:
+            typestore.register(types)
+        except Exception:  # rosbags' TypesysError: defined differently already
+            pass
 
 
 def make_typestore(ros2: bool = False):
@@ -97,10 +105,7 @@ def _open(paths: Iterable[Path]):
         raise InputError(paths[0] if len(paths) == 1 else None,
                          f"cannot open as a ROS 1/2 bag ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
     # Bags carry their own message definitions; make sure ours are known for ROS 2 bags without them.
-    try:
-        register_event_types(reader.typestore if hasattr(reader, "typestore") else store)
-    except Exception:  # already registered (same definitions)
-        pass
+    register_event_types(reader.typestore if hasattr(reader, "typestore") else store)
     return reader
 
 
@@ -187,6 +192,7 @@ def extract_bag(
         slices: dict[int, _Slice] = {}
         done = 0
         camera_info = None
+        packets = PacketStream(ev_topic)
         for conn, stamp, raw in reader.messages(connections=conns):
             if conn.topic in info_topics:
                 if camera_info is None:
@@ -195,7 +201,10 @@ def extract_bag(
             index = 0 if not settings.slice_s else int((stamp - t_begin) // int(settings.slice_s * 1e9))
             sl = slices.setdefault(index, _Slice())
             if conn.topic == ev_topic:
-                x, y, t, p, size = _decode_events(reader, conn, raw)
+                try:
+                    x, y, t, p, size = _decode_events(reader, conn, raw, packets)
+                except PacketError as exc:
+                    raise InputError(bag, str(exc)) from None
                 sl.chunks.append((x, y, t, p))
                 sl.size = sl.size or size
             elif len(sl.clouds) < settings.scans:
@@ -231,9 +240,13 @@ def extract_bag(
     return scenes
 
 
-def _decode_events(reader, conn, raw: bytes):
-    """(x, y, t_us, p, (width, height)) of one EventArray message."""
-    if conn.msgtype in EVENT_TYPES and not getattr(reader, "is2", False):
+def _decode_events(reader, conn, raw: bytes, packets: PacketStream):
+    """(x, y, t_us, p, (width, height)) of one EventArray or EventPacket message."""
+    if conn.msgtype == PACKET_TYPE:
+        msg = reader.deserialize(raw, conn.msgtype)
+        x, y, t, p = packets.decode(msg)
+        return x, y, t, p, ((int(msg.width), int(msg.height)) if msg.width and msg.height else None)
+    if not getattr(reader, "is2", False):
         # ROS 1: header (seq, stamp, frame_id), height, width, events[] of 13-byte records.
         off = 12
         flen = int.from_bytes(raw[off:off + 4], "little")
