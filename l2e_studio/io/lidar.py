@@ -44,9 +44,12 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
-from .safe_load import load_npy
+from ._table import count_rows
+from .safe_load import NPZ_ERRORS, load_npy, open_npz
 
-#: No lidar measures this far (metres); a binary scan full of such values is not a scan.
+#: No lidar measures this far (metres): the longest-ranged survey scanners reach about 6 km,
+#: automotive ones under 1 km. A point farther out on any axis is not a return in the lidar's own
+#: frame (map coordinates, millimetres, or damaged data) and the scan is refused.
 MAX_RANGE_M = 10_000.0
 
 #: File suffixes :func:`load_lidar` reads (``.pcd.bin`` is matched before ``.bin``).
@@ -93,7 +96,7 @@ def load_lidar(path: str | Path, intensity_field: str | None = None) -> LidarSca
         fields = reader(path)
     except InputError:
         raise
-    except (ValueError, OSError, EOFError, KeyError, IndexError) as exc:
+    except (*NPZ_ERRORS, IndexError) as exc:
         raise InputError(path, f"cannot read {suffix} lidar file ({exc})") from exc
     return _finish(path, fields, intensity_field)
 
@@ -156,6 +159,12 @@ def _finish(path: Path, fields: dict[str, np.ndarray], intensity_field: str | No
     ok = np.all(np.isfinite(xyz), axis=1) & np.isfinite(raw) & np.any(xyz != 0.0, axis=1)
     if not np.any(ok):
         raise InputError(path, f"none of the {xyz.shape[0]} points is valid (all NaN/inf or zero returns)")
+    far = ok & np.any(np.abs(xyz) > MAX_RANGE_M, axis=1)
+    if far.any():
+        worst = float(np.abs(xyz[far]).max())
+        raise InputError(path, f"{int(far.sum())} of {xyz.shape[0]} points lie farther than {MAX_RANGE_M / 1000:g} km "
+                               f"(up to {worst:.3g} m), beyond any lidar's range: expected points in the lidar's own "
+                               "frame, in metres (map coordinates, millimetres or damaged data?)")
     return LidarScan(
         points=xyz[ok].astype(np.float32),
         intensity=scale_intensity(raw[ok]),
@@ -203,12 +212,9 @@ def _read_text(path: Path) -> dict[str, np.ndarray]:
     ncols = len(first)
     if ncols < 3:
         raise InputError(path, f"expected 3 or more columns (x,y,z[,intensity]), the first data line has {ncols}")
+    nlines = count_rows(path, body, ncols, data.count(b"\n", 0, pos) + 1)
     flat = _parse_numbers(path, body, ncols, "the text is not numeric")
-    core = body.rstrip()
-    nlines = core.count(b"\n") + 1
-    if b"\n\n" in core or b"\n \n" in core:
-        nlines = sum(1 for ln in core.split(b"\n") if ln.strip())
-    if flat.size != nlines * ncols:
+    if flat.size != nlines * ncols:  # a token numpy's parser skipped or split differently
         _diagnose_text(path, body, ncols)
         raise InputError(path, f"ragged text: {flat.size} numbers is not {nlines} lines x {ncols} columns")
     if names is not None and len(names) != ncols:
@@ -275,7 +281,7 @@ def _read_pcd(path: Path) -> dict[str, np.ndarray]:
     kind = header["DATA"][0].lower() if header["DATA"] else ""
     body = data[pos:]
     if kind == "ascii":
-        table = _pcd_ascii(path, body, sum(counts))
+        table = _pcd_ascii(path, body, sum(counts), data.count(b"\n", 0, pos) + 1)
         columns, col = {}, 0
         for name, _, count in dtypes:
             columns[name] = table[:, col]
@@ -330,12 +336,14 @@ def _parse_numbers(path: Path, body: bytes, ncols: int, problem: str) -> np.ndar
             raise InputError(path, problem) from None
 
 
-def _pcd_ascii(path: Path, body: bytes, ncols: int) -> np.ndarray:
+def _pcd_ascii(path: Path, body: bytes, ncols: int, first_line: int) -> np.ndarray:
+    body = body.translate(_SEPARATORS)
+    nlines = count_rows(path, body, ncols, first_line)
     flat = _parse_numbers(path, body, ncols, "ascii PCD data is not numeric")
-    if flat.size % ncols:
+    if flat.size != nlines * ncols:
         _diagnose_text(path, body, ncols)
-        raise InputError(path, f"ascii PCD data has {flat.size} numbers, not a multiple of {ncols} columns")
-    return flat.reshape(-1, ncols)
+        raise InputError(path, f"ascii PCD data has {flat.size} numbers, not {nlines} lines x {ncols} columns")
+    return flat.reshape(nlines, ncols)
 
 
 def _first(a: np.ndarray) -> np.ndarray:
@@ -450,7 +458,7 @@ def _read_npy(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path, allow_pickle=False) as z:
+    with open_npz(path) as z:
         keys = list(z.keys())
         if "points" in keys:
             cols = _from_array(path, z["points"])

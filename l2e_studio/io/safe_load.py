@@ -3,6 +3,8 @@
 * a size cap before anything is read (:data:`MAX_DOCUMENT_BYTES`);
 * YAML without alias expansion bombs: an alias may only repeat a scalar, never a list or a
   mapping (a 634-byte "billion laughs" file otherwise expands to gigabytes downstream);
+* ``.npy`` / ``.npz`` arrays whose headers are checked against the bytes the file holds
+  before numpy allocates what they declare;
 * bounded nesting for YAML and JSON (:data:`MAX_DEPTH`), checked before the recursive parsers
   run, so a 100k-level file is one :class:`InputError`, not a ``RecursionError`` traceback.
 """
@@ -11,6 +13,8 @@ from __future__ import annotations
 
 import json
 import re
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -130,3 +134,56 @@ def load_npy(path: Path) -> "np.ndarray":
         return np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
         raise InputError(path, f"cannot read the .npy file ({str(exc).splitlines()[0]})") from None
+
+
+#: Errors a damaged .npz raises while its members are read (zip framing, deflate stream, npy header).
+NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError)
+#: Deflate expands at most 1032:1 (RFC 1951's longest match per code); a member declaring more
+#: uncompressed bytes than that lies about its size.
+DEFLATE_MAX_RATIO = 1032
+
+
+def open_npz(path: Path) -> "np.lib.npyio.NpzFile":
+    """``np.load`` of an .npz after checking that it is a zip archive of plain .npy arrays whose
+    declared shapes fit the bytes each member holds (numpy allocates the declared array first).
+    Reading a member later may still meet a damaged deflate stream: catch :data:`NPZ_ERRORS`."""
+    import numpy as np
+
+    if not zipfile.is_zipfile(path):
+        raise InputError(path, "not an .npz file (not a zip archive of .npy arrays)")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                _check_npz_member(path, zf, info)
+        return np.load(path, allow_pickle=False)
+    except InputError:
+        raise
+    except NPZ_ERRORS as exc:
+        raise InputError(path, f"damaged .npz archive ({_first_line(exc)})") from None
+
+
+def _check_npz_member(path: Path, zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> None:
+    import numpy as np
+
+    name = info.filename
+    if not name.endswith(".npy"):
+        raise InputError(path, f"the .npz member {name!r} is not a .npy array")
+    if info.compress_type != zipfile.ZIP_STORED and info.file_size > DEFLATE_MAX_RATIO * info.compress_size + 1024:
+        raise InputError(path, f"the .npz member {name!r} declares {info.file_size} bytes from {info.compress_size} "
+                               "compressed ones, more than deflate can expand")
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = read_header(fh)
+        header_bytes = fh.tell()
+    if dtype.hasobject:
+        raise InputError(path, f"the .npz member {name!r} holds Python objects; only plain arrays are read")
+    declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if declared > info.file_size - header_bytes:
+        raise InputError(path, f"the .npz member {name!r} declares {shape} {dtype} ({declared} bytes) but holds "
+                               f"{info.file_size - header_bytes} bytes of data")
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
