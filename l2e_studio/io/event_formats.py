@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 from ._table import count_rows
-from .safe_load import NPZ_ERRORS, open_npz
+from .safe_load import NPZ_ERRORS, load_npy, open_npz
 
 Arrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -299,8 +299,7 @@ def _pick(names, wanted) -> str | None:
 
 def _numpy(path: Path, chunk: int) -> Iterator[Arrays]:
     if path.suffix.lower() == ".npy":
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
-        yield from _from_array(path, arr, chunk)
+        yield from _from_array(path, load_npy(path, mmap=True), chunk)
         return
     with open_npz(path) as z:
         files = z.files

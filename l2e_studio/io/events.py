@@ -366,7 +366,7 @@ def _read_cache(cpath: Path, key: str) -> np.ndarray | None:
             if str(z["key"]) != key:
                 return None
             return z["map"].astype(np.float32)
-    except (OSError, KeyError, ValueError, EOFError):
+    except NPZ_ERRORS:  # a damaged cache entry is rebuilt
         return None
 
 

@@ -484,6 +484,7 @@ def _read_las(path: Path) -> dict[str, np.ndarray]:
     """
     import laspy
 
+    _check_las_header(path)
     try:
         with laspy.open(path) as reader:
             header = reader.header
@@ -500,6 +501,79 @@ def _read_las(path: Path) -> dict[str, np.ndarray]:
     if "intensity" in las.point_format.dimension_names:
         fields["intensity"] = np.asarray(las.intensity)
     return fields
+
+
+def _check_las_header(path: Path) -> None:
+    """Check the fixed LAS header's offsets and counts against the file's size before ``laspy``
+    reads it (it reads up to the point-data offset the header states, and a flipped byte there
+    asks for gigabytes)."""
+    import struct
+
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(375)
+    if len(head) < 227 or head[:4] != b"LASF":
+        raise InputError(path, "cannot read the LAS/LAZ file (no LASF signature or shorter than its 227-byte header)")
+    header_size, offset, n_vlr = struct.unpack_from("<HII", head, 94)
+    record = struct.unpack_from("<H", head, 105)[0]
+    count = struct.unpack_from("<I", head, 107)[0]
+    if head[25] >= 4 and len(head) >= 255:  # LAS 1.4: 64-bit count, extended VLRs
+        count = struct.unpack_from("<Q", head, 247)[0] or count
+        evlr_start, n_evlr = struct.unpack_from("<QI", head, 235)
+        if n_evlr and (evlr_start > size or n_evlr * 60 > size - evlr_start):
+            raise InputError(path, f"the header places {n_evlr} extended VLRs at byte {evlr_start} of a {size}-byte file")
+    if not 227 <= header_size <= offset <= size:
+        raise InputError(path, f"the header states a {header_size}-byte header and point data at byte {offset} "
+                               f"of a {size}-byte file")
+    if n_vlr * 54 > offset - header_size:
+        raise InputError(path, f"the header declares {n_vlr} VLRs, more than the {offset - header_size} bytes "
+                               "before the point data can hold")
+    compressed = path.suffix.lower() == ".laz" or bool(head[104] & 0xC0)
+    if count * record > (size - offset) * (MAX_LAZ_RATIO if compressed else 1):
+        raise InputError(path, f"the header declares {count} points of {record} bytes, more than the "
+                               f"{size - offset} bytes of point data can hold")
+    if compressed:
+        _check_laszip(path, header_size, n_vlr, offset, size, count)
+
+
+#: LASzip writes chunks of 50 000 points by default; a chunk this large is a damaged header
+#: (the decoder allocates a whole chunk up front).
+MAX_LAZ_CHUNK = 5_000_000
+
+
+def _check_laszip(path: Path, header_size: int, n_vlr: int, offset: int, size: int, count: int) -> None:
+    """The LASzip VLR's chunk size and the chunk table's place and length, checked before the
+    decoder trusts them (it allocates from them: a flipped byte asked for 34 GB and aborted)."""
+    import struct
+
+    with path.open("rb") as fh:
+        fh.seek(header_size)
+        vlrs = fh.read(offset - header_size)
+        fh.seek(offset)
+        table_at = fh.read(8)
+        pos, chunk = 0, None
+        for _ in range(n_vlr):
+            if pos + 54 > len(vlrs):
+                raise InputError(path, "the VLRs run past the point data")
+            user, record_id, length = vlrs[pos + 2: pos + 18], *struct.unpack_from("<HH", vlrs, pos + 18)
+            if user.rstrip(b"\0") == b"laszip encoded" and record_id == 22204 and length >= 16:
+                chunk = struct.unpack_from("<I", vlrs, pos + 54 + 12)[0]
+            pos += 54 + length
+        if chunk is None:
+            raise InputError(path, "compressed points but no LASzip VLR")
+        if chunk != 0xFFFFFFFF and chunk > MAX_LAZ_CHUNK:
+            raise InputError(path, f"the LASzip VLR states chunks of {chunk} points; at most {MAX_LAZ_CHUNK} are read")
+        if len(table_at) < 8:
+            raise InputError(path, "the file ends before its point data")
+        table = struct.unpack("<q", table_at)[0]
+        if table != -1:
+            if not offset + 8 <= table <= size - 8:
+                raise InputError(path, f"the LASzip chunk table is placed at byte {table} of a {size}-byte file")
+            fh.seek(table)
+            _, n_chunks = struct.unpack("<II", fh.read(8))
+            if n_chunks > min(size, count + 1):
+                raise InputError(path, f"the LASzip chunk table lists {n_chunks} chunks for {count} points "
+                                       f"in a {size}-byte file")
 
 
 _READERS = {

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import json
 import re
+import struct
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -113,31 +115,67 @@ def parse_json(path: Path, text: str) -> Any:
         raise InputError(path, f"invalid JSON ({exc.msg} at line {exc.lineno})") from None
 
 
-def load_npy(path: Path) -> "np.ndarray":
+#: Errors numpy raises on a damaged .npy header (its dict is parsed with ``ast``/``tokenize``).
+NPY_HEADER_ERRORS = (ValueError, OSError, EOFError, SyntaxError, tokenize.TokenError, struct.error)
+
+
+def read_npy_header(fh, available: int) -> tuple[tuple[int, ...], "np.dtype", int]:
+    """(shape, dtype, header bytes) of the .npy stream ``fh`` holding ``available`` bytes, after
+    checking the header's own length against them (numpy reads whatever length the header
+    states, and a flipped byte there asks for gigabytes)."""
+    import numpy as np
+
+    start = fh.read(12)
+    if len(start) < 10 or start[:6] != b"\x93NUMPY":
+        raise ValueError("not a .npy array (no \\x93NUMPY magic)")
+    major = start[6]
+    if major not in (1, 2, 3):
+        raise ValueError(f"unknown .npy format version {major}.{start[7]}")
+    length = struct.unpack("<H", start[8:10])[0] + 10 if major == 1 else struct.unpack("<I", start[8:12])[0] + 12
+    if length > min(available, 1 << 20):
+        raise ValueError(f"the .npy header claims {length} bytes but the data holds {available}")
+    fh.seek(0)
+    np.lib.format.read_magic(fh)
+    read_header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+    shape, _, dtype = read_header(fh)
+    return shape, dtype, length
+
+
+def check_npy_size(path: Path, shape: tuple[int, ...], dtype: "np.dtype", available: int, what: str = "the .npy header") -> None:
+    """Refuse a header declaring more data than the ``available`` bytes, or Python objects."""
+    import numpy as np
+
+    if dtype.hasobject:
+        raise InputError(path, f"{what} declares Python objects; only plain arrays are read")
+    if any(n < 0 for n in shape):
+        raise InputError(path, f"{what} declares a negative shape {shape}")
+    declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if declared > available:
+        raise InputError(path, f"{what} declares {shape} {dtype} ({declared} bytes) but the file holds "
+                               f"{available} bytes of data")
+
+
+def load_npy(path: Path, mmap: bool = False) -> "np.ndarray":
     """``np.load`` of a plain .npy after checking that the file holds the data its header declares
-    (``np.load`` allocates the declared array first: a 200-byte file can ask for gigabytes)."""
+    (``np.load`` allocates the declared array first: a 200-byte file can ask for gigabytes);
+    ``mmap`` maps it read-only instead of reading it."""
     import numpy as np
 
     try:
+        size = path.stat().st_size
         with path.open("rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-            shape, _, dtype = read_header(fh)
-            available = path.stat().st_size - fh.tell()
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, f"cannot read the .npy header ({exc})") from None
-    declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
-    if not dtype.hasobject and declared > available:
-        raise InputError(path, f"the .npy header declares {shape} {dtype} ({declared} bytes) but the file holds "
-                               f"{available} bytes of data")
+            shape, dtype, length = read_npy_header(fh, size)
+    except NPY_HEADER_ERRORS as exc:
+        raise InputError(path, f"cannot read the .npy header ({_first_line(exc)})") from None
+    check_npy_size(path, shape, dtype, size - length)
     try:
-        return np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, f"cannot read the .npy file ({str(exc).splitlines()[0]})") from None
+        return np.load(path, mmap_mode="r" if mmap else None, allow_pickle=False)
+    except NPY_HEADER_ERRORS as exc:
+        raise InputError(path, f"cannot read the .npy file ({_first_line(exc)})") from None
 
 
 #: Errors a damaged .npz raises while its members are read (zip framing, deflate stream, npy header).
-NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, NotImplementedError)
+NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, KeyError, NotImplementedError, RuntimeError, *NPY_HEADER_ERRORS)
 #: Deflate expands at most 1032:1 (RFC 1951's longest match per code); a member declaring more
 #: uncompressed bytes than that lies about its size.
 DEFLATE_MAX_RATIO = 1032
@@ -172,16 +210,8 @@ def _check_npz_member(path: Path, zf: zipfile.ZipFile, info: zipfile.ZipInfo) ->
         raise InputError(path, f"the .npz member {name!r} declares {info.file_size} bytes from {info.compress_size} "
                                "compressed ones, more than deflate can expand")
     with zf.open(info) as fh:
-        version = np.lib.format.read_magic(fh)
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, _, dtype = read_header(fh)
-        header_bytes = fh.tell()
-    if dtype.hasobject:
-        raise InputError(path, f"the .npz member {name!r} holds Python objects; only plain arrays are read")
-    declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
-    if declared > info.file_size - header_bytes:
-        raise InputError(path, f"the .npz member {name!r} declares {shape} {dtype} ({declared} bytes) but holds "
-                               f"{info.file_size - header_bytes} bytes of data")
+        shape, dtype, length = read_npy_header(fh, info.file_size)
+    check_npy_size(path, shape, dtype, info.file_size - length, f"the .npz member {name!r}")
 
 
 def _first_line(exc: BaseException) -> str:
