@@ -12,6 +12,7 @@ import json
 import struct
 import zlib
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -246,6 +247,71 @@ URDF = b'<joint name="cam_lidar" type="fixed">\n  <origin xyz="0.1 0 0" rpy="1.5
        b'  <parent link="camera"/>\n  <child link="lidar"/>\n</joint>\n'
 
 
+def _bag(tmp: Path, ros2: bool, storage: str = "sqlite3") -> tuple[bytes, Callable[[Path], object]]:
+    """A small bag (events, clouds, camera info) as the bytes of its one data file, and a loader
+    that puts damaged bytes back in place of that file and extracts the bag."""
+    import shutil
+
+    from l2e_studio.io.bags import extract_bag
+
+    folder = tmp / f"bag_{int(ros2)}_{storage}"
+    if not ros2:
+        _write_bag(folder.with_suffix(".bag"), ros2=False)
+        return folder.with_suffix(".bag").read_bytes(), lambda p: extract_bag(p, p.parent / "out")
+    _write_bag(folder, ros2=True, storage=storage)
+    data_file = next(f for f in folder.iterdir() if f.name != "metadata.yaml")
+
+    def load(path: Path):
+        bag = path.parent / "bag2"
+        shutil.rmtree(bag, ignore_errors=True)
+        bag.mkdir()
+        shutil.copy(folder / "metadata.yaml", bag)
+        shutil.copy(path, bag / data_file.name)
+        return extract_bag(bag, path.parent / "out")
+    return data_file.read_bytes(), load
+
+
+def _write_bag(path: Path, ros2: bool, storage: str = "sqlite3") -> None:
+    """Two dvs_msgs/EventArray messages and one PointCloud2, with the real ``rosbags`` writer."""
+    from l2e_studio.io.bags import make_typestore
+
+    store = make_typestore(ros2)
+    T = store.types
+    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    head = Header(stamp=Time(sec=1, nanosec=0), frame_id="f") if ros2 else \
+        Header(seq=0, stamp=Time(sec=1, nanosec=0), frame_id="f")
+    Event, EventArray = T["dvs_msgs/msg/Event"], T["dvs_msgs/msg/EventArray"]
+    msgs = []
+    for m in range(2):
+        sl = slice(m * 25, m * 25 + 25)
+        evs = [Event(x=int(x), y=int(y), ts=Time(sec=1, nanosec=int(t) * 1000), polarity=bool(p))
+               for x, y, t, p in zip(EV["x"][sl], EV["y"][sl], EV["t"][sl], EV["p"][sl])]
+        msgs.append(EventArray(header=head, height=H, width=W, events=evs))
+    PointField, PointCloud2 = T["sensor_msgs/msg/PointField"], T["sensor_msgs/msg/PointCloud2"]
+    fields = [PointField(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate(("x", "y", "z", "intensity"))]
+    cloud = PointCloud2(header=head, height=1, width=N, fields=fields, is_bigendian=False, point_step=16,
+                        row_step=16 * N, data=np.frombuffer(PTS.astype("<f4").tobytes(), np.uint8), is_dense=True)
+    if ros2:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        writer = Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()])
+        serialize = store.serialize_cdr
+    else:
+        from rosbags.rosbag1 import Writer
+
+        writer, serialize = Writer(path), store.serialize_ros1
+    with writer:
+        ev = writer.add_connection("/events", "dvs_msgs/msg/EventArray", typestore=store)
+        pc = writer.add_connection("/points", "sensor_msgs/msg/PointCloud2", typestore=store)
+        for i, msg in enumerate(msgs):
+            writer.write(ev, 1_000_000_000 + i * 1000, serialize(msg, ev.msgtype))
+        writer.write(pc, 1_000_000_500, serialize(cloud, pc.msgtype))
+
+
+def check_extracted(scenes) -> None:
+    assert scenes and all(s.events > 0 and s.points > 0 for s in scenes)
+
+
 def targets(tmp: Path) -> list[Target]:
     scan_lies = ()
     return [
@@ -302,6 +368,9 @@ def targets(tmp: Path) -> list[Target]:
                ((b"0.5 -0.5 0.5 0.5", b"0 0 0 0"), (b"0.5 -0.5 0.5 0.5", b"nan 0 0 1"))),
         Target("seed URDF joint", ".urdf", URDF, load_seed_file, check_seed, ((b'xyz="0.1 0 0"', b'xyz="0.1 0"'),)),
         Target("seed .npy", ".npy", _npy(np.eye(4)), load_seed_file, check_seed, ((b"(4, 4)", b"(4000, 4000)"),)),
+        Target("bag ROS 1", ".bag", *_bag(tmp, False), check_extracted),
+        Target("bag ROS 2 sqlite3", ".db3", *_bag(tmp, True), check_extracted),
+        Target("bag ROS 2 mcap", ".mcap", *_bag(tmp, True, "mcap"), check_extracted),
     ]
 
 
