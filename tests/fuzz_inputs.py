@@ -40,6 +40,8 @@ class Target:
     load: Callable[[Path], object]
     check: Callable[[object], None] = lambda result: None
     lies: tuple[tuple[bytes, bytes], ...] = ()
+    truncations: int = 300  # at most this many cut points, evenly spread (every offset of a smaller file)
+    flips: int = 150
 
 
 @dataclass
@@ -72,13 +74,13 @@ def mutations(data: bytes, seed: int, flips: int, max_truncations: int,
         yield f"lie {old!r} -> {new!r}", data.replace(old, new, 1)
 
 
-def run_target(target: Target, folder: Path, seed: int = 0, flips: int = 300, max_truncations: int = 1500) -> Report:
+def run_target(target: Target, folder: Path, seed: int = 0) -> Report:
     """Every mutation of ``target.data`` written to ``folder/case<suffix>`` and read."""
     report = Report(target.name)
     path = folder / f"case{target.suffix}"
     target.check(target.load(_write(path, target.data)))  # the undamaged file reads and passes its check
     t0 = time.perf_counter()
-    for label, data in mutations(target.data, seed, flips, max_truncations, target.lies):
+    for label, data in mutations(target.data, seed, target.flips, target.truncations, target.lies):
         report.cases += 1
         _write(path, data)
         tracemalloc.start()

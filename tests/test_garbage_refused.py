@@ -37,7 +37,7 @@ def scenes(tiny_dir, tmp_path) -> Path:
 # --- damage to one scene (returns the file the error must name) ------------------------------
 
 def _scan_table(folder: Path, i: int) -> tuple[Path, np.ndarray]:
-    f = sorted((folder / "lidar").glob("*.txt"))[i]
+    f = folder / "lidar" / f"scene_{i:03d}.txt"
     return f, np.loadtxt(f, delimiter=",")
 
 
@@ -50,7 +50,7 @@ def scan_far(folder: Path, i: int) -> Path:
 
 def scan_ragged_fits(folder: Path, i: int) -> Path:
     """Line 2 lost a value and line 3 gained one: the total is still 4 x lines."""
-    f = sorted((folder / "lidar").glob("*.txt"))[i]
+    f = folder / "lidar" / f"scene_{i:03d}.txt"
     lines = f.read_text().splitlines()
     lines[1] = lines[1].rsplit(",", 1)[0]
     lines[2] = lines[2] + ",7"
@@ -59,7 +59,7 @@ def scan_ragged_fits(folder: Path, i: int) -> Path:
 
 
 def scan_text_field(folder: Path, i: int) -> Path:
-    f = sorted((folder / "lidar").glob("*.txt"))[i]
+    f = folder / "lidar" / f"scene_{i:03d}.txt"
     lines = f.read_text().splitlines()
     lines[10] = lines[10].replace(",", ",high,", 1).rsplit(",", 1)[0]
     f.write_text("\n".join(lines) + "\n")
@@ -67,7 +67,7 @@ def scan_text_field(folder: Path, i: int) -> Path:
 
 
 def scan_npz_not_zip(folder: Path, i: int) -> Path:
-    f = sorted((folder / "lidar").glob("*.txt"))[i]
+    f = folder / "lidar" / f"scene_{i:03d}.txt"
     f.unlink()
     out = f.with_suffix(".npz")
     out.write_bytes(b"PK\x03\x04" + bytes(200))  # a zip signature and nothing behind it
@@ -85,7 +85,7 @@ def scan_ply_cut_in_a_record(folder: Path, i: int) -> Path:
 
 
 def _map(folder: Path, i: int) -> tuple[Path, np.ndarray]:
-    f = sorted((folder / "event").glob("*.png"))[i]
+    f = folder / "event" / f"scene_{i:03d}.png"
     return f, cv2.imread(str(f), cv2.IMREAD_UNCHANGED).astype(np.float32)
 
 
