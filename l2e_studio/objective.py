@@ -35,10 +35,11 @@ from .scoring import OBJECTIVES
 from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
+from .io.maps import MAP_CLIP
 from .scenes import Scene
 
 #: Maps of accumulated events are clipped here (the paper); camera images keep their 0..255.
-CLIP = {"events": 127.0, "image": 255.0}
+CLIP = MAP_CLIP
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
 
 

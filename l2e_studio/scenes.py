@@ -32,7 +32,8 @@ from .geometry import Extrinsic
 from .io.cameras import load_rig, load_seed
 from .io.events import EVENT_SUFFIXES, Accumulation, accumulate_with
 from .io.lidar import LIDAR_SUFFIXES, load_lidar
-from .io.maps import MAP_SUFFIXES, guess_kind, is_event_recording, load_map
+from .io.maps import (MAP_CLIP, MAP_SUFFIXES, MAX_CLIPPED_SHARE, RESCALED_CLIPPED_SHARE, fit_to_clip, guess_kind,
+                      is_event_recording, load_map)
 
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
@@ -52,6 +53,7 @@ class Scene:
     lidar_path: Path | None = None
     map_path: Path | None = None
     accumulation: Accumulation | None = None  # how the map was built from raw events; None: read as an image
+    map_scale: float = 1.0  # the file's values were multiplied by this to fit the clip (:func:`~.io.maps.fit_to_clip`)
 
     def map_record(self) -> dict:
         """How this scene's map was made, as result files record it (``accumulation`` is None
@@ -157,6 +159,13 @@ def load_scene_folder(
     if photos and map_kind is None:
         notes.append(f"{len(photos)} map(s) under {photos[0].map_path.parent} look like camera images, not accumulated "
                      f"events (e.g. {photos[0].map_path.name}): scored as images; --map-kind events overrides")
+    rescaled = [s for s in scenes if s.map_scale != 1.0]
+    if rescaled:
+        first = rescaled[0]
+        notes.append(f"{len(rescaled)} map(s) had more than {MAX_CLIPPED_SHARE:.0%} of their non-zero pixels above the "
+                     f"clip of {MAP_CLIP[first.map_kind]:g} (16-bit counts or a long window?), which would flatten them: "
+                     f"rescaled so {RESCALED_CLIPPED_SHARE:.0%} lie above it (e.g. {first.map_path}: values x "
+                     f"{first.map_scale:.4g})")
     return SceneSet(root, camera, seed, scenes, failures, unpaired, seed_source, str(rig_path), notes)
 
 
@@ -175,9 +184,10 @@ def load_scene(
     settings = acc or Accumulation()
     event_map, kind = load_map(map_path, width=w, height=h, kind=map_kind, window_s=settings.window_s,
                                start_s=settings.start_s, hot_pixel_sigma=settings.hot_pixel_sigma)
+    event_map, scale = fit_to_clip(event_map, kind)
     points, intensity = _load_scan_cached(lidar_path, cache_root)
     check_informative(map_path, event_map, lidar_path, intensity)
-    return Scene(name, points, intensity, event_map, kind, lidar_path, map_path, acc)
+    return Scene(name, points, intensity, event_map, kind, lidar_path, map_path, acc, scale)
 
 
 def reaccumulate(scene: Scene, settings: Accumulation, width: int, height: int) -> Scene:

@@ -90,6 +90,56 @@ class TopicInfo:
         return "other"
 
 
+#: How much a ROS 1 chunk may expand: LZ4 reaches at most 255:1; bz2 is given the same bound
+#: (bags of sensor data compress a few times, never a thousand).
+MAX_CHUNK_RATIO = 255
+
+
+def check_ros1_records(path: Path) -> None:
+    """Walk a ROS 1 bag's records (header length, header, data length, data) and refuse one
+    that states more bytes than the file holds, or a chunk that claims to expand beyond
+    :data:`MAX_CHUNK_RATIO` (the reader allocates what they state: a flipped byte asked for 832 MB)."""
+    import struct
+
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        if fh.readline(64) != b"#ROSBAG V2.0\n":
+            return  # not a ROS 1 bag v2.0: the reader says what it is
+        pos = fh.tell()
+        while pos < size:
+            head = fh.read(4)
+            if len(head) < 4:
+                raise InputError(path, f"the bag ends inside the record at byte {pos} (truncated?)")
+            header_len = struct.unpack("<I", head)[0]
+            if header_len > size - pos - 8:
+                raise InputError(path, f"the record at byte {pos} states a {header_len}-byte header but the file "
+                                       f"holds {size - pos - 4} more bytes (truncated or damaged bag)")
+            header = fh.read(header_len)
+            data_len = struct.unpack("<I", fh.read(4))[0]
+            if data_len > size - pos - 8 - header_len:
+                raise InputError(path, f"the record at byte {pos} states {data_len} bytes of data but the file "
+                                       f"holds {size - pos - 8 - header_len} more (truncated or damaged bag)")
+            fields = _ros1_fields(header)
+            if fields.get("op") == b"\x05" and "size" in fields and len(fields["size"]) == 4:  # a chunk
+                unpacked = struct.unpack("<I", fields["size"])[0]
+                ratio = 1 if fields.get("compression", b"none") == b"none" else MAX_CHUNK_RATIO
+                if unpacked > data_len * ratio + 1024:
+                    raise InputError(path, f"the chunk at byte {pos} claims {unpacked} bytes from {data_len} "
+                                           f"({fields.get('compression', b'none').decode('ascii', 'replace')})")
+            pos = fh.seek(data_len, 1)
+
+
+def _ros1_fields(header: bytes) -> dict[str, bytes]:
+    """``name=value`` fields of a ROS 1 record header (each prefixed by its uint32 length)."""
+    fields, i = {}, 0
+    while i + 4 <= len(header):
+        n = int.from_bytes(header[i:i + 4], "little")
+        name, _, value = header[i + 4:i + 4 + n].partition(b"=")
+        fields[name.decode("ascii", "replace")] = value
+        i += 4 + n
+    return fields
+
+
 def _open(paths: Iterable[Path]):
     from rosbags.highlevel import AnyReader
 
@@ -97,6 +147,8 @@ def _open(paths: Iterable[Path]):
     for p in paths:
         if not p.exists():
             raise InputError(p, "bag not found")
+        if p.is_file():
+            check_ros1_records(p)
     store = make_typestore()
     try:
         reader = AnyReader(paths, default_typestore=store)

@@ -13,6 +13,8 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import InputError
+from ._table import count_rows
+from .safe_load import NPZ_ERRORS, load_npy, open_npz
 
 Arrays = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -33,13 +35,15 @@ def decoder(path: Path, suffix: str, chunk: int) -> Iterator[Arrays]:
 
 
 def sensor_size(path: Path, suffix: str) -> tuple[int, int] | None:
+    """(width, height) as the file's metadata states it; None when it says nothing readable
+    (the decoder then reports what is wrong with the file itself)."""
     try:
         if suffix == ".aedat4":
             import aedat  # type: ignore[import-not-found]
 
             for info in aedat.Decoder(str(path)).id_to_stream().values():
                 if info.get("type") == "events" and info.get("width"):
-                    return int(info["width"]), int(info["height"])
+                    return _whole(info["width"]), _whole(info["height"])
             return None
         if suffix in (".h5", ".hdf5"):
             import h5py
@@ -50,53 +54,90 @@ def sensor_size(path: Path, suffix: str) -> tuple[int, int] | None:
                         continue
                     attrs = node.attrs
                     if "width" in attrs and "height" in attrs:
-                        return int(attrs["width"]), int(attrs["height"])
+                        return _whole(attrs["width"]), _whole(attrs["height"])
                     if "sensor_size" in attrs:
                         w, h = np.asarray(attrs["sensor_size"]).ravel()[:2]
-                        return int(w), int(h)
+                        return _whole(w), _whole(h)
                     if "geometry" in attrs:
                         m = re.match(r"(\d+)x(\d+)", str(attrs["geometry"]))
                         if m:
                             return int(m.group(1)), int(m.group(2))
             return None
         if suffix == ".npz":
-            with np.load(path, allow_pickle=False) as z:
+            with open_npz(path) as z:
                 if "sensor_size" in z.files:
                     w, h = z["sensor_size"].ravel()[:2]
-                    return int(w), int(h)
+                    return _whole(w), _whole(h)
                 if "width" in z.files and "height" in z.files:
-                    return int(z["width"]), int(z["height"])
+                    return _whole(z["width"]), _whole(z["height"])
             return None
         if suffix == ".txt":
             with open(path, "rb") as f:
-                first = f.readline().split()
+                first = f.readline(256).split()
             if len(first) == 2 and all(t.isdigit() for t in first):
                 return int(first[0]), int(first[1])
-    except (OSError, ValueError, KeyError, RuntimeError):
+    except (OSError, ValueError, KeyError, RuntimeError, *NPZ_ERRORS):
         return None
     return None
 
 
-def _to_us(t: np.ndarray, span_hint: float | None = None) -> np.ndarray:
-    """Integer times are microseconds; float times are seconds when the span is < 1e4."""
-    t = np.asarray(t)
+def _whole(value) -> int:
+    """One whole number from a metadata value (a scalar or a one-element array); ValueError otherwise."""
+    a = np.asarray(value)
+    if a.size != 1 or not np.issubdtype(a.dtype, np.number):
+        raise ValueError(f"not a single number: {value!r}")
+    v = float(a.reshape(()))
+    if not np.isfinite(v) or v != round(v):
+        raise ValueError(f"not a whole number: {value!r}")
+    return int(v)
+
+
+#: Largest |time| accepted, microseconds (about 146 000 years): int64 holds it with room to spare.
+MAX_TIME_US = 2.0 ** 62
+
+
+def _to_us(path: Path, t: np.ndarray, span_hint: float | None = None, seconds: bool | None = None) -> np.ndarray:
+    """Event times as int64 microseconds. Integer times are microseconds; float times are seconds
+    when ``seconds`` says so, else when the span (``span_hint`` or this array's) is < 1e4.
+    NaN, infinite or out-of-range times cannot be placed in a window: refused, counted."""
+    t = _column(path, t, "times")
     if np.issubdtype(t.dtype, np.integer) or np.issubdtype(t.dtype, np.bool_):
+        if t.size and t.dtype == np.uint64 and int(t.max()) > MAX_TIME_US:
+            raise InputError(path, f"event times up to {int(t.max())} us do not fit a 64-bit signed count")
         return t.astype(np.int64)
-    span = span_hint if span_hint is not None else (float(t.max() - t.min()) if t.size else 0.0)
-    if not np.all(np.isfinite(t)):
-        raise ValueError("event times have NaN or infinite values")
-    return np.rint(t * 1e6).astype(np.int64) if span < 1e4 else np.rint(t).astype(np.int64)
+    bad = int(np.count_nonzero(~np.isfinite(t)))
+    if bad:
+        raise InputError(path, f"{bad} of {t.size} event times are NaN or infinite; such events cannot be placed "
+                               "in a time window")
+    if seconds is None:
+        span = span_hint if span_hint is not None else (float(t.max() - t.min()) if t.size else 0.0)
+        seconds = span < 1e4
+    us = t * 1e6 if seconds else t.astype(np.float64)
+    if us.size and float(np.abs(us).max()) > MAX_TIME_US:
+        raise InputError(path, f"event times up to {float(np.abs(t).max()):.3g} {'s' if seconds else 'us'} are beyond any "
+                               "clock (expected seconds or microseconds)")
+    return np.rint(us).astype(np.int64)
 
 
-def _polarity(p: np.ndarray) -> np.ndarray:
-    p = np.asarray(p)
+def _column(path: Path, a: np.ndarray, what: str) -> np.ndarray:
+    """``a`` as a 1-D numeric array, or an InputError naming what it holds."""
+    a = np.asarray(a)
+    if a.ndim != 1 or not (np.issubdtype(a.dtype, np.number) or np.issubdtype(a.dtype, np.bool_)):
+        raise InputError(path, f"event {what} must be a 1-D array of numbers, got {a.dtype} of shape {a.shape}")
+    return a
+
+
+def _polarity(path: Path, p: np.ndarray) -> np.ndarray:
+    p = _column(path, p, "polarities")
+    if not np.issubdtype(p.dtype, np.integer) and not np.issubdtype(p.dtype, np.bool_) and not np.all(np.isfinite(p)):
+        raise InputError(path, "event polarities have NaN or infinite values")
     return (p > 0).astype(np.uint8)
 
 
 def _coords(path: Path, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x)
     y = np.asarray(y)
-    if not all(np.issubdtype(a.dtype, np.number) and a.ndim == 1 for a in (x, y)):
+    if not all(np.issubdtype(a.dtype, np.number) and a.ndim == 1 for a in (x, y)) or x.shape != y.shape:
         raise InputError(path, f"event coordinates must be 1-D numbers, got {x.dtype} {x.shape} and {y.dtype} {y.shape}")
     if x.size and not (np.issubdtype(x.dtype, np.integer) and np.issubdtype(y.dtype, np.integer)):
         bad = int(np.count_nonzero(~(np.isfinite(x) & np.isfinite(y))))
@@ -177,7 +218,7 @@ def _hdf5_events(path: Path, chunk: int) -> Iterator[Arrays]:
     except OSError as exc:
         raise InputError(path, f"not a readable HDF5 file ({exc})") from None
     with f:
-        offset = int(np.asarray(f["t_offset"])) if "t_offset" in f else 0
+        offset = _h5_offset(path, f)
         group = None
         for cand in ("events", ""):
             if cand and cand not in f:
@@ -187,17 +228,20 @@ def _hdf5_events(path: Path, chunk: int) -> Iterator[Arrays]:
                 group = g
                 break
         if group is not None:
-            x_ds, y_ds = group["x"], group["y"]
-            t_ds, p_ds = group[_pick(group, _T_NAMES)], group[_pick(group, _P_NAMES)]
-            n = t_ds.shape[0]
-            if not (x_ds.shape[0] == y_ds.shape[0] == p_ds.shape[0] == n):
+            names = {"x": "x", "y": "y", "t": _pick(group, _T_NAMES), "p": _pick(group, _P_NAMES)}
+            ds = {k: group[v] for k, v in names.items()}
+            for k, d in ds.items():
+                if not isinstance(d, h5py.Dataset) or d.ndim != 1 or d.dtype.names is not None:
+                    shape = d.shape if isinstance(d, h5py.Dataset) else "a group"
+                    raise InputError(path, f"HDF5 event array {d.name} must be a 1-D dataset of numbers, got {shape}")
+            n = ds["t"].shape[0]
+            if not all(d.shape[0] == n for d in ds.values()):
                 raise InputError(path, "HDF5 event arrays x, y, t, p have different lengths")
-            float_t = not np.issubdtype(t_ds.dtype, np.integer)
-            span = float(t_ds[-1] - t_ds[0]) if (float_t and n) else None
+            span = _span(path, np.asarray([ds["t"][0], ds["t"][n - 1]]) if n else ds["t"][:0])
             for i in range(0, n, chunk):
-                t = _to_us(t_ds[i:i + chunk], span) + offset
-                x, y = _coords(path, x_ds[i:i + chunk], y_ds[i:i + chunk])
-                yield x, y, t, _polarity(p_ds[i:i + chunk])
+                t = _to_us(path, ds["t"][i:i + chunk], span) + offset
+                x, y = _coords(path, ds["x"][i:i + chunk], ds["y"][i:i + chunk])
+                yield x, y, t, _polarity(path, ds["p"][i:i + chunk])
             return
         table = None
         for cand in ("events", "CD/events"):
@@ -210,15 +254,40 @@ def _hdf5_events(path: Path, chunk: int) -> Iterator[Arrays]:
         tn, pn = _pick(names, _T_NAMES), _pick(names, _P_NAMES)
         if tn is None or pn is None or "x" not in names or "y" not in names:
             raise InputError(path, f"event table fields are {names}; expected x, y, t, p")
+        if table.ndim != 1:
+            raise InputError(path, f"the HDF5 event table {table.name} must be 1-D, got shape {table.shape}")
         try:
             for i in range(0, table.shape[0], chunk):
                 rec = table[i:i + chunk]
                 x, y = _coords(path, rec["x"], rec["y"])
-                yield x, y, _to_us(rec[tn]) + offset, _polarity(rec[pn])
+                yield x, y, _to_us(path, rec[tn]) + offset, _polarity(path, rec[pn])
         except OSError as exc:
             if "filter" in str(exc).lower() or "plugin" in str(exc).lower():
                 raise
             raise InputError(path, f"cannot read the event table ({exc})") from None
+
+
+def _h5_offset(path: Path, f) -> int:
+    """DSEC's root ``t_offset`` (microseconds added to every time): one whole number, or 0."""
+    import h5py
+
+    if "t_offset" not in f:
+        return 0
+    node = f["t_offset"]
+    value = np.asarray(node[()]) if isinstance(node, h5py.Dataset) else None
+    if value is None or value.size != 1 or not np.issubdtype(value.dtype, np.number):
+        what = "a group" if value is None else f"{value.dtype} of shape {value.shape}"
+        raise InputError(path, f"t_offset must be one number of microseconds, got {what}")
+    v = value.reshape(()).item()
+    if not (np.isfinite(v) and abs(v) <= MAX_TIME_US and float(v) == round(v)):
+        raise InputError(path, f"t_offset must be a whole number of microseconds within ±2^62, got {v!r}")
+    return int(v)
+
+
+def _span(path: Path, t: np.ndarray) -> float:
+    """max - min of event times (0 for none), for the seconds-or-microseconds rule."""
+    t = _column(path, t, "times")
+    return float(np.max(t)) - float(np.min(t)) if t.size else 0.0
 
 
 def _pick(names, wanted) -> str | None:
@@ -230,20 +299,20 @@ def _pick(names, wanted) -> str | None:
 
 def _numpy(path: Path, chunk: int) -> Iterator[Arrays]:
     if path.suffix.lower() == ".npy":
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
-        yield from _from_array(path, arr, chunk)
+        yield from _from_array(path, load_npy(path, mmap=True), chunk)
         return
-    with np.load(path, allow_pickle=False) as z:
+    with open_npz(path) as z:
         files = z.files
         if "x" in files and "y" in files and _pick(files, _T_NAMES) and _pick(files, _P_NAMES):
-            x, y = z["x"], z["y"]
-            t, p = z[_pick(files, _T_NAMES)], z[_pick(files, _P_NAMES)]
+            x, y = _column(path, z["x"], "x"), _column(path, z["y"], "y")
+            t = _column(path, z[_pick(files, _T_NAMES)], "times")
+            p = _column(path, z[_pick(files, _P_NAMES)], "polarities")
             if not (x.shape[0] == y.shape[0] == t.shape[0] == p.shape[0]):
                 raise InputError(path, "npz event arrays x, y, t, p have different lengths")
-            span = float(t.max() - t.min()) if t.size else 0.0
+            span = _span(path, t)
             for i in range(0, t.shape[0], chunk):
                 xs, ys = _coords(path, x[i:i + chunk], y[i:i + chunk])
-                yield xs, ys, _to_us(t[i:i + chunk], span), _polarity(p[i:i + chunk])
+                yield xs, ys, _to_us(path, t[i:i + chunk], span), _polarity(path, p[i:i + chunk])
             return
         key = "events" if "events" in files else (files[0] if len(files) == 1 else None)
         if key is None:
@@ -257,20 +326,21 @@ def _from_array(path: Path, arr: np.ndarray, chunk: int) -> Iterator[Arrays]:
         tn, pn = _pick(names, _T_NAMES), _pick(names, _P_NAMES)
         if tn is None or pn is None or "x" not in names or "y" not in names:
             raise InputError(path, f"event array fields are {names}; expected x, y, t, p")
-        t_all = arr[tn]
-        span = float(t_all.max() - t_all.min()) if t_all.size else 0.0
+        if arr.ndim != 1:
+            raise InputError(path, f"a structured event array must be 1-D, got shape {arr.shape}")
+        span = _span(path, arr[tn])
         for i in range(0, arr.shape[0], chunk):
             rec = arr[i:i + chunk]
             x, y = _coords(path, rec["x"], rec["y"])
-            yield x, y, _to_us(rec[tn], span), _polarity(rec[pn])
+            yield x, y, _to_us(path, rec[tn], span), _polarity(path, rec[pn])
         return
     if arr.ndim != 2 or arr.shape[1] != 4:
         raise InputError(path, f"expected a structured event array or (N, 4) columns t, x, y, p; got shape {arr.shape}")
-    span = float(arr[:, 0].max() - arr[:, 0].min()) if arr.shape[0] else 0.0
+    span = _span(path, arr[:, 0])
     for i in range(0, arr.shape[0], chunk):
         block = np.asarray(arr[i:i + chunk])
         x, y = _coords(path, block[:, 1], block[:, 2])
-        yield x, y, _to_us(block[:, 0], span), _polarity(block[:, 3])
+        yield x, y, _to_us(path, block[:, 0], span), _polarity(path, block[:, 3])
 
 
 # --- text --------------------------------------------------------------------------------
@@ -295,17 +365,15 @@ def _text(path: Path, chunk: int) -> Iterator[Arrays]:
             if seconds is None:
                 tok = body.split(None, 1)[0]
                 seconds = b"." in tok or b"e" in tok.lower()
+            rows = count_rows(path, body, 4, line_no + 1)
             try:
                 flat = np.array(body.split(), dtype=np.float64)
             except ValueError:
                 raise InputError(path, f"non-numeric text after line {line_no}; expected 't x y p' per line") from None
-            if flat.size % 4:
-                raise InputError(path, f"text events must have 4 columns (t x y p); bad line after line {line_no}")
-            table = flat.reshape(-1, 4)
-            line_no += table.shape[0]
-            t = np.rint(table[:, 0] * 1e6).astype(np.int64) if seconds else table[:, 0].astype(np.int64)
+            table = flat.reshape(rows, 4)
+            line_no += body.count(b"\n")
             x, y = _coords(path, table[:, 1], table[:, 2])
-            yield x, y, t, _polarity(table[:, 3])
+            yield x, y, _to_us(path, table[:, 0], seconds=seconds), _polarity(path, table[:, 3])
 
 
 def _line_blocks(f, block_bytes: int) -> Iterator[bytes]:

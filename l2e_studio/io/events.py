@@ -38,6 +38,7 @@ from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from ..limits import MAX_BACKWARD_STEP_US, MAX_EVENT_SENSOR_SIDE
 from . import event_prophesee as prophesee
+from .safe_load import NPZ_ERRORS
 
 #: Suffixes of raw event recordings (``.txt`` only inside an event folder; ``.npy`` may also be a 2D map).
 EVENT_SUFFIXES: tuple[str, ...] = (".raw", ".dat", ".aedat4", ".h5", ".hdf5", ".npz", ".npy", ".txt")
@@ -108,13 +109,16 @@ def iter_events(path: str | Path, chunk_size: int = DEFAULT_CHUNK) -> Iterator[E
     try:
         t_max, seen = None, 0
         for x, y, t, p in _decoder(path, suffix, chunk_size):
+            if not len(x) == len(y) == len(t) == len(p):
+                raise InputError(path, f"a chunk holds {len(x)} x, {len(y)} y, {len(t)} times and {len(p)} polarities; "
+                                       "they must be as many")
             if len(t):
                 t_max = _check_time_order(path, t, t_max, seen)
                 seen += len(t)
                 yield EventChunk(x, y, t, p)
     except InputError:
         raise
-    except (ValueError, OSError, KeyError, EOFError, RuntimeError) as exc:
+    except (*NPZ_ERRORS, RuntimeError) as exc:
         raise InputError(path, f"cannot decode {suffix} events ({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from exc
 
 
@@ -362,7 +366,7 @@ def _read_cache(cpath: Path, key: str) -> np.ndarray | None:
             if str(z["key"]) != key:
                 return None
             return z["map"].astype(np.float32)
-    except (OSError, KeyError, ValueError, EOFError):
+    except NPZ_ERRORS:  # a damaged cache entry is rebuilt
         return None
 
 

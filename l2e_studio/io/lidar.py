@@ -44,9 +44,12 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..errors import InputError
 from . import _lzf
-from .safe_load import load_npy
+from ._table import count_rows
+from .safe_load import NPZ_ERRORS, load_npy, open_npz
 
-#: No lidar measures this far (metres); a binary scan full of such values is not a scan.
+#: No lidar measures this far (metres): the longest-ranged survey scanners reach about 6 km,
+#: automotive ones under 1 km. A point farther out on any axis is not a return in the lidar's own
+#: frame (map coordinates, millimetres, or damaged data) and the scan is refused.
 MAX_RANGE_M = 10_000.0
 
 #: File suffixes :func:`load_lidar` reads (``.pcd.bin`` is matched before ``.bin``).
@@ -93,7 +96,7 @@ def load_lidar(path: str | Path, intensity_field: str | None = None) -> LidarSca
         fields = reader(path)
     except InputError:
         raise
-    except (ValueError, OSError, EOFError, KeyError, IndexError) as exc:
+    except (*NPZ_ERRORS, IndexError) as exc:
         raise InputError(path, f"cannot read {suffix} lidar file ({exc})") from exc
     return _finish(path, fields, intensity_field)
 
@@ -156,6 +159,12 @@ def _finish(path: Path, fields: dict[str, np.ndarray], intensity_field: str | No
     ok = np.all(np.isfinite(xyz), axis=1) & np.isfinite(raw) & np.any(xyz != 0.0, axis=1)
     if not np.any(ok):
         raise InputError(path, f"none of the {xyz.shape[0]} points is valid (all NaN/inf or zero returns)")
+    far = ok & np.any(np.abs(xyz) > MAX_RANGE_M, axis=1)
+    if far.any():
+        worst = float(np.abs(xyz[far]).max())
+        raise InputError(path, f"{int(far.sum())} of {xyz.shape[0]} points lie farther than {MAX_RANGE_M / 1000:g} km "
+                               f"(up to {worst:.3g} m), beyond any lidar's range: expected points in the lidar's own "
+                               "frame, in metres (map coordinates, millimetres or damaged data?)")
     return LidarScan(
         points=xyz[ok].astype(np.float32),
         intensity=scale_intensity(raw[ok]),
@@ -203,12 +212,9 @@ def _read_text(path: Path) -> dict[str, np.ndarray]:
     ncols = len(first)
     if ncols < 3:
         raise InputError(path, f"expected 3 or more columns (x,y,z[,intensity]), the first data line has {ncols}")
+    nlines = count_rows(path, body, ncols, data.count(b"\n", 0, pos) + 1)
     flat = _parse_numbers(path, body, ncols, "the text is not numeric")
-    core = body.rstrip()
-    nlines = core.count(b"\n") + 1
-    if b"\n\n" in core or b"\n \n" in core:
-        nlines = sum(1 for ln in core.split(b"\n") if ln.strip())
-    if flat.size != nlines * ncols:
+    if flat.size != nlines * ncols:  # a token numpy's parser skipped or split differently
         _diagnose_text(path, body, ncols)
         raise InputError(path, f"ragged text: {flat.size} numbers is not {nlines} lines x {ncols} columns")
     if names is not None and len(names) != ncols:
@@ -275,7 +281,7 @@ def _read_pcd(path: Path) -> dict[str, np.ndarray]:
     kind = header["DATA"][0].lower() if header["DATA"] else ""
     body = data[pos:]
     if kind == "ascii":
-        table = _pcd_ascii(path, body, sum(counts))
+        table = _pcd_ascii(path, body, sum(counts), data.count(b"\n", 0, pos) + 1)
         columns, col = {}, 0
         for name, _, count in dtypes:
             columns[name] = table[:, col]
@@ -330,12 +336,14 @@ def _parse_numbers(path: Path, body: bytes, ncols: int, problem: str) -> np.ndar
             raise InputError(path, problem) from None
 
 
-def _pcd_ascii(path: Path, body: bytes, ncols: int) -> np.ndarray:
+def _pcd_ascii(path: Path, body: bytes, ncols: int, first_line: int) -> np.ndarray:
+    body = body.translate(_SEPARATORS)
+    nlines = count_rows(path, body, ncols, first_line)
     flat = _parse_numbers(path, body, ncols, "ascii PCD data is not numeric")
-    if flat.size % ncols:
+    if flat.size != nlines * ncols:
         _diagnose_text(path, body, ncols)
-        raise InputError(path, f"ascii PCD data has {flat.size} numbers, not a multiple of {ncols} columns")
-    return flat.reshape(-1, ncols)
+        raise InputError(path, f"ascii PCD data has {flat.size} numbers, not {nlines} lines x {ncols} columns")
+    return flat.reshape(nlines, ncols)
 
 
 def _first(a: np.ndarray) -> np.ndarray:
@@ -450,7 +458,7 @@ def _read_npy(path: Path) -> dict[str, np.ndarray]:
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path, allow_pickle=False) as z:
+    with open_npz(path) as z:
         keys = list(z.keys())
         if "points" in keys:
             cols = _from_array(path, z["points"])
@@ -476,6 +484,7 @@ def _read_las(path: Path) -> dict[str, np.ndarray]:
     """
     import laspy
 
+    _check_las_header(path)
     try:
         with laspy.open(path) as reader:
             header = reader.header
@@ -492,6 +501,79 @@ def _read_las(path: Path) -> dict[str, np.ndarray]:
     if "intensity" in las.point_format.dimension_names:
         fields["intensity"] = np.asarray(las.intensity)
     return fields
+
+
+def _check_las_header(path: Path) -> None:
+    """Check the fixed LAS header's offsets and counts against the file's size before ``laspy``
+    reads it (it reads up to the point-data offset the header states, and a flipped byte there
+    asks for gigabytes)."""
+    import struct
+
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(375)
+    if len(head) < 227 or head[:4] != b"LASF":
+        raise InputError(path, "cannot read the LAS/LAZ file (no LASF signature or shorter than its 227-byte header)")
+    header_size, offset, n_vlr = struct.unpack_from("<HII", head, 94)
+    record = struct.unpack_from("<H", head, 105)[0]
+    count = struct.unpack_from("<I", head, 107)[0]
+    if head[25] >= 4 and len(head) >= 255:  # LAS 1.4: 64-bit count, extended VLRs
+        count = struct.unpack_from("<Q", head, 247)[0] or count
+        evlr_start, n_evlr = struct.unpack_from("<QI", head, 235)
+        if n_evlr and (evlr_start > size or n_evlr * 60 > size - evlr_start):
+            raise InputError(path, f"the header places {n_evlr} extended VLRs at byte {evlr_start} of a {size}-byte file")
+    if not 227 <= header_size <= offset <= size:
+        raise InputError(path, f"the header states a {header_size}-byte header and point data at byte {offset} "
+                               f"of a {size}-byte file")
+    if n_vlr * 54 > offset - header_size:
+        raise InputError(path, f"the header declares {n_vlr} VLRs, more than the {offset - header_size} bytes "
+                               "before the point data can hold")
+    compressed = path.suffix.lower() == ".laz" or bool(head[104] & 0xC0)
+    if count * record > (size - offset) * (MAX_LAZ_RATIO if compressed else 1):
+        raise InputError(path, f"the header declares {count} points of {record} bytes, more than the "
+                               f"{size - offset} bytes of point data can hold")
+    if compressed:
+        _check_laszip(path, header_size, n_vlr, offset, size, count)
+
+
+#: LASzip writes chunks of 50 000 points by default; a chunk this large is a damaged header
+#: (the decoder allocates a whole chunk up front).
+MAX_LAZ_CHUNK = 5_000_000
+
+
+def _check_laszip(path: Path, header_size: int, n_vlr: int, offset: int, size: int, count: int) -> None:
+    """The LASzip VLR's chunk size and the chunk table's place and length, checked before the
+    decoder trusts them (it allocates from them: a flipped byte asked for 34 GB and aborted)."""
+    import struct
+
+    with path.open("rb") as fh:
+        fh.seek(header_size)
+        vlrs = fh.read(offset - header_size)
+        fh.seek(offset)
+        table_at = fh.read(8)
+        pos, chunk = 0, None
+        for _ in range(n_vlr):
+            if pos + 54 > len(vlrs):
+                raise InputError(path, "the VLRs run past the point data")
+            user, record_id, length = vlrs[pos + 2: pos + 18], *struct.unpack_from("<HH", vlrs, pos + 18)
+            if user.rstrip(b"\0") == b"laszip encoded" and record_id == 22204 and length >= 16:
+                chunk = struct.unpack_from("<I", vlrs, pos + 54 + 12)[0]
+            pos += 54 + length
+        if chunk is None:
+            raise InputError(path, "compressed points but no LASzip VLR")
+        if chunk != 0xFFFFFFFF and chunk > MAX_LAZ_CHUNK:
+            raise InputError(path, f"the LASzip VLR states chunks of {chunk} points; at most {MAX_LAZ_CHUNK} are read")
+        if len(table_at) < 8:
+            raise InputError(path, "the file ends before its point data")
+        table = struct.unpack("<q", table_at)[0]
+        if table != -1:
+            if not offset + 8 <= table <= size - 8:
+                raise InputError(path, f"the LASzip chunk table is placed at byte {table} of a {size}-byte file")
+            fh.seek(table)
+            _, n_chunks = struct.unpack("<II", fh.read(8))
+            if n_chunks > min(size, count + 1):
+                raise InputError(path, f"the LASzip chunk table lists {n_chunks} chunks for {count} points "
+                                       f"in a {size}-byte file")
 
 
 _READERS = {

@@ -32,6 +32,15 @@ from .safe_load import load_npy
 #: Image suffixes read as maps. Raw event suffixes (``EVENT_SUFFIXES``) are accepted as well.
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".exr")
 MAP_KINDS = ("events", "image")
+#: What the objective clips each kind of map to: the paper's [0, 127] for event counts (a few
+#: pixels fire wildly), the 8-bit range for camera frames.
+MAP_CLIP = {"events": 127.0, "image": 255.0}
+#: The clip is meant for a few wild pixels: when more than this share of a map's non-zero pixels
+#: lies above it (a 16-bit map, a long window), the clipped map would be little more than a mask
+#: of where events fired, so it is rescaled. (Maps that fit, e.g. the synthetic ones, have 1-10 %.)
+MAX_CLIPPED_SHARE = 0.5
+#: After rescaling, this share of the non-zero pixels lies above the clip (the "few wild pixels").
+RESCALED_CLIPPED_SHARE = 0.01
 
 
 def _event_suffixes() -> tuple[str, ...]:
@@ -129,7 +138,33 @@ def load_map(
         if kind == "events" and looks_like_photo(image):
             kind = "image"
     _check_size(path, image, width, height)
+    check_values(path, image)
     return image, kind
+
+
+def check_values(path: Path, image: np.ndarray) -> None:
+    """Refuse a map with NaN, infinite or negative values: neither event counts nor grey levels
+    can be negative, and such a map is damaged or something else (a depth or flow image...)."""
+    bad = int(np.count_nonzero(~np.isfinite(image)))
+    if bad:
+        raise InputError(path, f"{bad} of {image.size} map values are NaN or infinite; expected event counts or grey levels")
+    negative = int(np.count_nonzero(image < 0))
+    if negative:
+        raise InputError(path, f"{negative} of {image.size} map values are negative (down to {float(image.min()):.4g}); "
+                               "expected event counts or grey levels, which are >= 0")
+
+
+def fit_to_clip(image: np.ndarray, kind: str) -> tuple[np.ndarray, float]:
+    """``(map, scale)``: the map multiplied by ``scale`` (1: unchanged) so that at most
+    :data:`RESCALED_CLIPPED_SHARE` of its non-zero pixels lie above the clip of its ``kind``,
+    when more than :data:`MAX_CLIPPED_SHARE` did (clipping would flatten the map: a 16-bit map
+    whose counts are all above 127 carries no information after the clip)."""
+    clip = MAP_CLIP[kind]
+    firing = image[image > 0]
+    if firing.size == 0 or np.count_nonzero(firing > clip) <= MAX_CLIPPED_SHARE * firing.size:
+        return image, 1.0
+    scale = clip / float(np.percentile(firing, 100 * (1 - RESCALED_CLIPPED_SHARE)))
+    return (image * np.float32(scale)).astype(np.float32), scale
 
 
 def png_size(data: bytes) -> tuple[int, int] | None:
@@ -164,17 +199,12 @@ def _read_image(path: Path, width: int | None = None, height: int | None = None)
         img = img[:, :, 0]
     elif channels != 1:
         raise InputError(path, f"image has {channels} channels; expected 1, 3 or 4")
-    if not np.all(np.isfinite(img)):
-        raise InputError(path, "image has NaN or infinite pixels")
     return np.ascontiguousarray(img, dtype=np.float32), channels
 
 
 def is_map_npy(path: Path) -> bool:
     """Whether a .npy holds a 2D map (plain, more than 8 columns) rather than an event table."""
-    try:
-        arr = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(path, f"cannot read .npy ({exc})") from exc
+    arr = load_npy(path, mmap=True)
     return arr.dtype.names is None and arr.ndim == 2 and arr.shape[1] > 8
 
 
@@ -182,10 +212,9 @@ def _read_npy_map(path: Path) -> np.ndarray:
     arr = load_npy(path)
     if not np.issubdtype(arr.dtype, np.number):
         raise InputError(path, f"map array has non-numeric dtype {arr.dtype}")
-    arr = arr.astype(np.float32)
-    if not np.all(np.isfinite(arr)):
-        raise InputError(path, "map has NaN or infinite values")
-    return arr
+    if arr.ndim != 2 or arr.size == 0:
+        raise InputError(path, f"a map array must be 2-D, got shape {arr.shape}")
+    return arr.astype(np.float32)
 
 
 def _check_size(path: Path, image: np.ndarray, width: int | None, height: int | None) -> None:
