@@ -360,6 +360,7 @@ class App:
             log.exception("scoring the result's answers failed")
             self.result_scores = None
         self.results.show(snap, self.held_out, self.result_scores)
+        self.optimise.show_handed_back(self.result_scores)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()

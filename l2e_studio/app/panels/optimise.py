@@ -157,6 +157,14 @@ class OptimisePanel:
         self.progress.animated = running
         self.show_start()
 
+    def show_handed_back(self, scores) -> None:
+        """After the run: what is handed back and its score, as the Result tab and the readout show it."""
+        if scores is None:
+            return
+        a = scores.accepted
+        self.status.content += (f"  \n**After Accept**: {a.what} · {self.app.readout.label} {score_num(a.score)} "
+                                f"({change(a.score, scores.seed.score)} vs the seed; details in the Result tab)")
+
     def show_progress(self, run: RunState) -> None:
         label = self.app.readout.label
         if run.best_curve:
