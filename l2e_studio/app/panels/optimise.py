@@ -1,8 +1,9 @@
 """The optimisation: settings, Start / Cancel, and live progress (bar, score curve, best pose),
 then the judging's own steps.
 
-The curve is on one scale: the best point so far scored like the readout (the final smoothing,
-every point of the included scenes), with the stage on a second axis. Each stage's own
+The curve is on one scale: the optimiser's best point (5 times a second) scored like the readout
+(the final smoothing, every point of the included scenes), with the stage on a second axis; it
+may dip inside a coarse stage, whose best point is best at that stage's smoothing only. Each stage's own
 objective smooths the maps differently (20 px, then 8, then the final sigma), so its values are
 not comparable across stages: plotted raw, a "best" fell at every stage change.
 
@@ -71,10 +72,10 @@ class OptimisePanel:
             (np.zeros(1), np.zeros(1), np.zeros(1)),
             (
                 viser.uplot.Series(label="evaluation"),
-                viser.uplot.Series(label=f"best {label} (as the readout)", stroke="#e8590c", width=2),
+                viser.uplot.Series(label=f"{label} of the best point (as the readout)", stroke="#e8590c", width=2),
                 viser.uplot.Series(label="stage", stroke="#868e96", width=1, dash=[4, 3], scale="stage"),
             ),
-            title=f"best {label} so far, one scale (final σ, all points) · stage",
+            title=f"{label} of the optimiser's best point, one scale (final σ, all points) · stage",
             scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True),
                     "stage": viser.uplot.Scale(auto=False, range=(0.5, 3.5))},
             axes=(viser.uplot.Axis(), viser.uplot.Axis(label=label),
@@ -176,7 +177,7 @@ class OptimisePanel:
         if run.status == "cancelled" and run.judging is not None:
             head = "■ **Cancelled while judging**: the optimiser finished, its result is **not judged**"
         best, seed = (run.best_curve[-1][1], run.best_curve[0][1]) if run.best_curve else (None, None)
-        scored = (f"best {label} {score_num(best)} ({change(best, seed)} vs the seed {score_num(seed)}; "
+        scored = (f"{label} of the best point {score_num(best)} ({change(best, seed)} vs the seed {score_num(seed)}; "
                   f"final σ, all points: the readout's scale)")
         j = run.judging
         if run.active and j is not None:  # the optimiser is done, the verdict is being computed
