@@ -2,10 +2,11 @@
 then the judging's own steps.
 
 The curve is on one scale: the optimiser's best point (5 times a second) scored like the readout
-(the final smoothing, every point of the included scenes), with the stage on a second axis; it
-may dip inside a coarse stage, whose best point is best at that stage's smoothing only. Each stage's own
-objective smooths the maps differently (20 px, then 8, then the final sigma), so its values are
-not comparable across stages: plotted raw, a "best" fell at every stage change.
+(the final smoothing, every point of the included scenes), the best of those so far, with the
+stage on a second axis (with the edge score's multi-start search, each new start climbs the
+stages again). Each stage's own objective scores the same point differently (its smoothing, map
+scale and points), and each start's search begins below the best so far: plotted raw, a "best"
+fell at every stage change and every new start.
 
 The run itself is :func:`l2e_studio.calibrate.calibrate` in a worker thread (see
 :meth:`App.start_run`); this panel only reads settings and shows :class:`RunState`.
@@ -72,10 +73,10 @@ class OptimisePanel:
             (np.zeros(1), np.zeros(1), np.zeros(1)),
             (
                 viser.uplot.Series(label="evaluation"),
-                viser.uplot.Series(label=f"{label} of the best point (as the readout)", stroke="#e8590c", width=2),
+                viser.uplot.Series(label=f"best {label} so far (any start, as the readout)", stroke="#e8590c", width=2),
                 viser.uplot.Series(label="stage", stroke="#868e96", width=1, dash=[4, 3], scale="stage"),
             ),
-            title=f"{label} of the optimiser's best point, one scale (final σ, all points) · stage",
+            title=f"best {label} so far, one scale (final σ, all points) · stage",
             scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True),
                     "stage": viser.uplot.Scale(auto=False, range=(0.5, 3.5))},
             axes=(viser.uplot.Axis(), viser.uplot.Axis(label=label),
@@ -198,7 +199,7 @@ class OptimisePanel:
 
 
 def curve_data(run: RunState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(evaluation, best score on the common scale, stage number 1..) for the plot."""
+    """(evaluation, best score so far on the common scale, stage number 1..) for the plot."""
     c = np.asarray(run.best_curve, dtype=np.float64)
     if run.history:
         h = np.asarray(run.history, dtype=np.float64)
@@ -206,4 +207,4 @@ def curve_data(run: RunState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         stage = h[k, 3] + 1.0
     else:
         stage = np.ones(len(c))
-    return c[:, 0], c[:, 1], stage
+    return c[:, 0], np.maximum.accumulate(c[:, 1]), stage
