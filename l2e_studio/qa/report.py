@@ -166,6 +166,7 @@ pre{background:#f7f7f7;border:1px solid #ddd;padding:8px;overflow-x:auto;font-si
 figure{margin:8px 0} figcaption{font-size:12px;color:#555} img{max-width:100%;height:auto;border:1px solid #ccc}
 .pair{display:flex;gap:8px;flex-wrap:wrap} .pair figure{flex:1 1 45%}
 .held{color:#a05000;font-weight:600} .small{font-size:12px;color:#555}
+table.checks td{text-align:left}
 """
 
 
@@ -261,16 +262,22 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
     # result and exports
     add("<h2 id='result'>Result, in every export form</h2>")
     ext = inp.extrinsic
-    corr = correction(inp.seed, ext)
     add("<p class='small'>The result as a correction of the seed, in the camera frame (rx, ry, rz: rotations "
         "about the camera's x, y, z axes; absolute roll/pitch/yaw of a lidar-to-camera rotation sit at gimbal lock, "
         "where a small correction reads as a large change).</p>")
+
+    def row(name: str, e: Extrinsic) -> list:
+        corr = correction(inp.seed, e)
+        deg, m = inp.seed.error_to(e)
+        return [name, *[f"{v:.5f}" for v in e.translation], *[f"{v:+.2f}" for v in corr[:3]],
+                *[f"{v:+.4f}" for v in corr[3:]], f"{deg:.4f}", f"{1000 * m:.2f}"]
+
+    rows = [row("seed", inp.seed), row("result (handed back)", ext)]
+    own = (inp.result.get("optimiser_result") or {}).get("T_cam_lidar")
+    if own is not None and not np.allclose(own, ext.matrix, atol=1e-9):
+        rows.append(row("the optimiser's own answer (not handed back)", Extrinsic.from_matrix(np.asarray(own, float))))
     add(_tbl(["", "x (m)", "y (m)", "z (m)", "dx (mm)", "dy (mm)", "dz (mm)", "drx (deg)", "dry (deg)", "drz (deg)",
-              "rotation (deg)", "translation (mm)"],
-             [["seed", *[f"{v:.5f}" for v in inp.seed.translation], *["0"] * 6, "0", "0"],
-              ["result", *[f"{v:.5f}" for v in ext.translation], *[f"{v:+.2f}" for v in corr[:3]],
-               *[f"{v:+.4f}" for v in corr[3:]], f"{inp.seed.error_to(ext)[0]:.4f}",
-               f"{1000 * inp.seed.error_to(ext)[1]:.2f}"]]))
+              "rotation (deg)", "translation (mm)"], rows))
     doc = inp.result if "T_cam_lidar" in inp.result else None
     for fmt in EXPORT_FORMATS:
         if fmt in ("yaml", "json"):
@@ -369,7 +376,7 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         box = figures.crop_box(sc.event_map)
         f = figures.display_factor(cam)
         j = table.scenes.index(sc.name) if sc.name in table.scenes else -1
-        mi = (f" - MI seed {_fmt(table.per_scene[0, j])}, result {_fmt(table.per_scene[1, j])}"
+        mi = (f" - paper's MI seed {_fmt(table.per_scene[0, j])}, result {_fmt(table.per_scene[1, j])}"
               + (" (held out)" if table.held_out[j] else "")) if j >= 0 else ""
         kind = MAP_NAMES.get(sc.map_kind, sc.map_kind)
         add(f"<h3>{_e(sc.name)} ({_e(kind)}){_e(mi)}</h3><div class='pair'>"
