@@ -212,12 +212,13 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
 
 
 def refine(
-    stack: SceneStack, start: Extrinsic, settings: CalibrationSettings, cancel: threading.Event | None = None
+    stack: SceneStack, start: Extrinsic, settings: CalibrationSettings, cancel: threading.Event | None = None,
+    on_progress: Callable[[Progress], None] | None = None,
 ) -> Extrinsic:
     """Where the search of :func:`calibrate` ends from ``start``, without its bookkeeping
     (no scores at the seed and the result, no never-worse rule): the probe the verdict uses."""
     with single_threaded_blas():
-        return _search(stack, start, settings, None, cancel, time.perf_counter()).end
+        return _search(stack, start, settings, on_progress, cancel, time.perf_counter()).end
 
 
 def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":

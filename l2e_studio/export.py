@@ -45,13 +45,16 @@ def result_to_dict(
     quality: dict | None = None,
     verdict: Verdict | None = None,
     maps: dict[str, dict] | None = None,
+    judging_cancelled: bool = False,
 ) -> dict:
     """The result file's content as plain Python types (``quality``: an assessment, if run;
     ``maps``: scene name -> how its map was made, see :meth:`l2e_studio.scenes.Scene.map_record`).
 
     With a ``verdict``, the calibration written at the top is the one the verdict hands back
     (the seed, when the result was not trusted); the optimiser's own answer stays on record
-    under ``optimiser_result``."""
+    under ``optimiser_result``. Without one, ``verdict:`` says ``not judged`` and why
+    (``judging_cancelled``: the run finished but its judging was cancelled); ``cancelled`` at
+    the top is true when the run or its judging was cancelled."""
     ext = result.extrinsic if verdict is None else verdict.extrinsic
     s = result.settings
     out = {
@@ -87,9 +90,12 @@ def result_to_dict(
         "optimisation_seconds": round(float(result.seconds), 4),
         "scenes": list(result.scene_names),
     }
+    out["cancelled"] = bool(result.cancelled or judging_cancelled)
     if verdict is not None:
         out["verdict"] = verdict.to_dict()
         out["optimiser_result"] = extrinsic_to_dict(result.extrinsic)
+    else:
+        out["verdict"] = not_judged(result.cancelled, judging_cancelled)
     if maps is not None:
         out["maps"] = dict(maps)
     if scenes_dir is not None:
@@ -107,6 +113,18 @@ def result_to_dict(
     return out
 
 
+NOT_JUDGED = "not judged"
+
+
+def not_judged(run_cancelled: bool = False, judging_cancelled: bool = False) -> dict:
+    """The ``verdict:`` section of a result that has no verdict, saying why."""
+    why = ("the run was cancelled: its best point so far is not a converged result" if run_cancelled
+           else "its judging was cancelled" if judging_cancelled
+           else "the result was not judged (--no-verdict, or judging failed)")
+    return {"status": NOT_JUDGED, "summary": f"{NOT_JUDGED}: {why}",
+            "cancelled": bool(run_cancelled or judging_cancelled)}
+
+
 def dumps(data: dict, path: str | Path) -> bytes:
     """Serialise as JSON when ``path`` ends in .json, YAML otherwise."""
     if str(path).lower().endswith(".json"):
@@ -122,11 +140,12 @@ def write_result(
     quality: dict | None = None,
     verdict: Verdict | None = None,
     maps: dict[str, dict] | None = None,
+    judging_cancelled: bool = False,
 ) -> tuple[Path, Path | None]:
     """Write the result file atomically. Returns ``(path, backup)``: an existing file at
     ``path`` is first kept under a timestamped backup name, never overwritten."""
     path = Path(path)
-    data = result_bytes(path, result, camera, scenes_dir, quality, verdict, maps)
+    data = result_bytes(path, result, camera, scenes_dir, quality, verdict, maps, judging_cancelled)
     return path, atomic_write_bytes(path, data, keep_existing=True)
 
 
@@ -138,9 +157,10 @@ def result_bytes(
     quality: dict | None = None,
     verdict: Verdict | None = None,
     maps: dict[str, dict] | None = None,
+    judging_cancelled: bool = False,
 ) -> bytes:
     """The result file's bytes, in the format ``path``'s name asks for."""
-    return dumps(result_to_dict(result, camera, scenes_dir, quality, verdict, maps), path)
+    return dumps(result_to_dict(result, camera, scenes_dir, quality, verdict, maps, judging_cancelled), path)
 
 
 def _round(a) -> list:
@@ -167,6 +187,32 @@ EXPORT_FORMATS: dict[str, str] = {
 DIRECTION = "T_cam_lidar: maps points from the lidar frame into the camera frame, X_cam = R X_lidar + t"
 
 
+def export_status(result: dict | None) -> tuple[str, list[str]]:
+    """``(status, lines)``: the verdict an export carries, in words. ``result``: the result
+    file's content (None for a plain seed or transform file). ``status`` is the verdict's
+    (``trusted``, ``trusted-rotation``, ``not-trusted``), ``not judged``, or ``no verdict`` for
+    a file that is no calibration result; ``lines`` say what the transform is (for
+    ``trusted-rotation``: that its translation is the seed's, not an estimate)."""
+    if result is None:
+        return "no verdict", ["status: no verdict (exported from a seed or transform file, not a calibration result)"]
+    v = result.get("verdict")
+    if not isinstance(v, dict):
+        v = not_judged(bool(result.get("optimiser", {}).get("cancelled")))
+    status = str(v.get("status") or ("trusted" if v.get("trusted") is True else
+                                    "not-trusted" if v.get("trusted") is False else NOT_JUDGED))
+    lines = [f"status: {status}" + (f" ({v['summary']})" if v.get("summary") else "")]
+    if status == "trusted-rotation":
+        lines.append("translation: the SEED's translation, not calibrated (these scenes do not pin it down); "
+                     "only the rotation was calibrated and checked")
+    elif status == "not-trusted":
+        lines.append("this is the SEED, not a calibration: the result was not trusted" if v.get("kept_seed", True)
+                     else "this is the optimiser's result, which was NOT TRUSTED")
+    elif status == NOT_JUDGED:
+        lines.append("this transform was not checked" + (": the run or its judging was cancelled"
+                                                        if v.get("cancelled") or result.get("cancelled") else ""))
+    return status, lines
+
+
 def export_text(
     ext: Extrinsic,
     fmt: str,
@@ -175,43 +221,48 @@ def export_text(
     result: dict | None = None,
 ) -> str:
     """``T_cam_lidar`` in one export format (see :data:`EXPORT_FORMATS`), with a comment (or a
-    field) that says which frame maps to which. Every one reads back through
-    :func:`l2e_studio.io.cameras.load_seed`. ``result``: the full result dict for yaml/json
-    (default: the transform alone)."""
+    field) that says which frame maps to which, and the verdict (:func:`export_status`) as the
+    format's comments (a ``status``/``status_notes`` field in JSON, which has none). Every one
+    reads back through :func:`l2e_studio.io.cameras.load_seed`. ``result``: the full result dict
+    (written whole for yaml/json; default: the transform alone, marked as no verdict)."""
     if fmt not in EXPORT_FORMATS:
         raise ValueError(f"unknown export format {fmt!r}; expected one of {', '.join(EXPORT_FORMATS)}")
     t, q = ext.translation, ext.quaternion_xyzw
     num = lambda v: f"{v:.9f}".rstrip("0").rstrip(".") if abs(v) > 0 else "0"  # noqa: E731
+    status, notes = export_status(result)
+    hashes = "".join(f"# {line}\n" for line in notes)
     if fmt in ("yaml", "json"):
         data = dict(result) if result is not None else {"direction": DIRECTION, **extrinsic_to_dict(ext)}
         data.setdefault("direction", DIRECTION)
         if fmt == "json":
-            return json.dumps(data, indent=2) + "\n"
-        return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
+            return json.dumps({"status": status, "status_notes": notes, **data}, indent=2) + "\n"
+        return hashes + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120)
     if fmt == "matrix":
         rows = "\n".join(" ".join(f"{v: .10f}" for v in row) for row in ext.matrix)
-        return f"# {DIRECTION}\n# frames: {lidar_frame} -> {camera_frame}; 4x4 homogeneous, row major\n{rows}\n"
+        return f"# {DIRECTION}\n# frames: {lidar_frame} -> {camera_frame}; 4x4 homogeneous, row major\n{hashes}{rows}\n"
     if fmt == "ros1":
         args = " ".join(num(v) for v in [*t, *q])
         return (
             f"# ROS 1 (tf2_ros): publishes {camera_frame} -> {lidar_frame}, i.e. the pose of '{lidar_frame}' in "
             f"'{camera_frame}' = {DIRECTION}\n"
-            f"# arguments: x y z qx qy qz qw frame_id child_frame_id\n"
+            f"# arguments: x y z qx qy qz qw frame_id child_frame_id\n{hashes}"
             f"rosrun tf2_ros static_transform_publisher {args} {camera_frame} {lidar_frame}\n"
         )
     if fmt == "ros2":
         named = " ".join(f"--{k} {num(v)}" for k, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), [*t, *q]))
         return (
             f"# ROS 2 (tf2_ros): publishes {camera_frame} -> {lidar_frame}, i.e. the pose of '{lidar_frame}' in "
-            f"'{camera_frame}' = {DIRECTION}\n"
+            f"'{camera_frame}' = {DIRECTION}\n{hashes}"
             f"ros2 run tf2_ros static_transform_publisher {named} --frame-id {camera_frame} --child-frame-id {lidar_frame}\n"
         )
     if fmt == "urdf":
         rpy = ext.rpy(degrees=False)
+        # "--" may not appear inside an XML comment
+        xml_notes = "".join(f"<!-- {line.replace('--', '- -')} -->\n" for line in notes)
         return (
             f"<!-- URDF fixed joint: parent '{camera_frame}', child '{lidar_frame}'; origin = pose of the child in the "
             f"parent = T_cam_lidar (maps lidar-frame points into the camera frame). rpy in radians, "
-            f"R = Rz(yaw) Ry(pitch) Rx(roll) -->\n"
+            f"R = Rz(yaw) Ry(pitch) Rx(roll) -->\n{xml_notes}"
             f'<joint name="{camera_frame}_to_{lidar_frame}" type="fixed">\n'
             f'  <parent link="{camera_frame}"/>\n'
             f'  <child link="{lidar_frame}"/>\n'
@@ -221,7 +272,7 @@ def export_text(
     # kalibr
     data = {"cam0": {"T_cam_lidar": _round(ext.matrix), "rostopic": f"/{camera_frame}"}}
     return (
-        f"# Kalibr-style camchain entry. {DIRECTION} (4x4, row major), as Kalibr's T_cam_imu is imu -> cam\n"
+        f"# Kalibr-style camchain entry. {DIRECTION} (4x4, row major), as Kalibr's T_cam_imu is imu -> cam\n{hashes}"
         + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=200)
     )
 

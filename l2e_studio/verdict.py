@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from .calibrate import CalibrationResult, CalibrationSettings, refine
+from .calibrate import CalibrationResult, CalibrationSettings, Progress, refine
 from .geometry import Extrinsic
 from .objective import SceneStack
 from .scoring.edges import canny_distance, lidar_edge_weights
@@ -104,6 +104,50 @@ class Verdict:
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             "seconds": round(self.seconds, 3),
         }
+
+
+@dataclass(frozen=True)
+class JudgeProgress:
+    """A snapshot sent to ``judge``'s ``on_progress``: step ``step`` of ``steps`` (1-based; the
+    count grows when a rotation is re-fitted), what it is, and the share of the judging done."""
+
+    step: int
+    steps: int
+    label: str
+    fraction: float  # 0..1 (within a refinement, its optimiser's own progress)
+    elapsed: float  # seconds
+
+
+class JudgingCancelled(RuntimeError):
+    """Raised by :func:`judge` once its ``cancel`` event is set: a half-judged result has no verdict."""
+
+
+class _Steps:
+    """The judging's steps: a cancel check and a progress report at each (and inside refinements)."""
+
+    def __init__(self, total: int, cancel: threading.Event | None, on_progress: Callable[[JudgeProgress], None] | None):
+        self.step, self.total, self.label = 0, total, ""
+        self.cancel, self.on_progress, self.t0 = cancel, on_progress, time.perf_counter()
+
+    def check(self) -> None:
+        if self.cancel is not None and self.cancel.is_set():
+            raise JudgingCancelled("judging cancelled")
+
+    def next(self, label: str) -> None:
+        """Step ``label`` begins (raises :class:`JudgingCancelled` when cancelled)."""
+        self.check()
+        self.step, self.label = self.step + 1, label
+        self.total = max(self.total, self.step)
+        self._report(0.0)
+
+    def within(self, p: Progress) -> None:
+        """A refinement's progress (the ``on_progress`` of :func:`l2e_studio.calibrate.refine`)."""
+        self._report(p.fraction)
+
+    def _report(self, inner: float) -> None:
+        if self.on_progress is not None:
+            self.on_progress(JudgeProgress(self.step, self.total, self.label,
+                                           min(1.0, (self.step - 1 + inner) / self.total), time.perf_counter() - self.t0))
 
 
 def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
@@ -183,15 +227,23 @@ def judge(
     settings: CalibrationSettings = CalibrationSettings(),
     on_untrusted: str = "keep-seed",
     cancel: threading.Event | None = None,
+    on_progress: Callable[[JudgeProgress], None] | None = None,
 ) -> Verdict:
-    """Judge ``result`` (a calibration of ``stack`` from ``result.seed``) on evidence it did not climb."""
+    """Judge ``result`` (a calibration of ``stack`` from ``result.seed``) on evidence it did not climb.
+
+    ``on_progress`` is called at each step (and within each refinement) with a
+    :class:`JudgeProgress`; once ``cancel`` is set, the next check raises :class:`JudgingCancelled`
+    (within one objective evaluation or one score, well under a second)."""
     if on_untrusted not in ON_UNTRUSTED:
         raise ValueError(f"on_untrusted must be one of {', '.join(ON_UNTRUSTED)}")
     t0 = time.perf_counter()
+    steps = _Steps(1 + evidence_steps(settings), cancel, on_progress)
     seed, res = result.seed, result.extrinsic
+    steps.next("preparing the final smoothing and the second score")
     final = stack.with_sigma(settings.sigma)
+    steps.check()
     second = second_score(final)
-    checks = evidence(final, seed, res, settings, second, cancel)
+    checks = evidence(final, seed, res, settings, second, cancel, steps)
     rival = rival_check(result)
     if rival is not None:
         checks.append(rival)
@@ -212,19 +264,27 @@ def judge(
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
         # fit the rotation to it (near the result's), and judge that rotation afresh.
         rotation = replace(settings, rotation_only=True)
+        steps.total += 1 + evidence_steps(rotation)
+        steps.next("re-fitting the rotation to the seed's translation")
         refit = refine(final, Extrinsic(res.rotvec, seed.translation),
                        replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
-                       cancel)
+                       cancel, steps.within)
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks = evidence(final, seed, refit, rotation, second, cancel)
+        rot_checks = evidence(final, seed, refit, rotation, second, cancel, steps)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return Verdict("trusted-rotation", refit, False, reasons, tuple(checks) + tuple(rot_checks),
                            time.perf_counter() - t0)
         reasons += tuple(f"with the seed's translation, {c.name}: {c.detail}" for c in rot_failed)
         checks += rot_checks
+    steps.check()
     keep = on_untrusted == "keep-seed"
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
+
+
+def evidence_steps(settings: CalibrationSettings) -> int:
+    """How many steps :func:`evidence` reports (scores, translation probes, two halves, second start)."""
+    return 4 + (not settings.rotation_only)
 
 
 def rival_check(result: CalibrationResult) -> Check | None:
@@ -250,25 +310,31 @@ def evidence(
     settings: CalibrationSettings,
     second: tuple[str, Callable[[Extrinsic], float]],
     cancel: threading.Event | None = None,
+    steps: _Steps | None = None,
 ) -> list[Check]:
     """The checks of ``res`` against ``seed`` on ``final`` (the stack at the final smoothing),
     ``second`` being :func:`second_score` of it. With ``settings.rotation_only`` the
-    translation is the seed's and only the rotation is tested."""
+    translation is the seed's and only the rotation is tested. ``steps``: progress and cancel
+    (:func:`evidence_steps` of them)."""
+    steps = steps or _Steps(evidence_steps(settings), cancel, None)
     rotation_only = settings.rotation_only
     tag = " (rotation only)" if rotation_only else ""
     # agreement is asked to the precision the move from the seed needs: independent estimates
     # must agree well within the distance moved (and to AGREE_DEG however small the move)
     limit_deg = min(max(AGREE_DEG, AGREE_FRACTION * seed.error_to(res)[0]), AGREE_MAX_DEG)
     checks: list[Check] = []
+    steps.next("the scores at the seed and at the result")
     s_seed, s_res = final.score(seed, per_scene=False)[0], final.score(res, per_scene=False)[0]
     checks.append(Check("score" + tag, s_res > s_seed, f"{final.objective_name} score {s_seed:.4f} -> {s_res:.4f}"))
 
     name, score2 = second
+    steps.check()
     before, after = score2(seed), score2(res)
     slack = SECOND_SCORE_SLACK if name.startswith("edge") else 0.0
     checks.append(Check("second score" + tag, after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
 
     if not rotation_only:
+        steps.next("translation probes: the result moved 5 cm along x, y, z")
         drops = translation_drops(final, res, s_res)
         need = OBSERVABLE_DROP[final.objective_name]
         checks.append(Check("translation observable (translation)", bool(np.all(drops >= need)),
@@ -285,16 +351,17 @@ def evidence(
         budget = None if last.max_points is None else last.max_points // 2  # half the points, half the budget
         local = replace(settings, stages=(replace(last, max_points=budget),), global_search=False)
         better, detail, rot_moved, trans_moved = True, [], [], []
-        for mine in (a, b):
+        for i, mine in enumerate((a, b)):
+            steps.next(f"half {i + 1} of 2: refined on its own")
             half = final.select(mine)
             h_seed, h_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
             better &= h_res > h_seed
             detail.append(f"{h_seed:.4f} -> {h_res:.4f}")
-            deg, m = refine(half, res, local, cancel).error_to(res)
+            deg, m = refine(half, res, local, cancel, steps.within).error_to(res)
             if not rotation_only:
                 trans_moved.append(m)
                 if m > AGREE_M:  # a drifting translation confounds the rotation: ask for it alone
-                    deg = refine(half, res, replace(local, rotation_only=True), cancel).error_to(res)[0]
+                    deg = refine(half, res, replace(local, rotation_only=True), cancel, steps.within).error_to(res)[0]
             rot_moved.append(deg)
         checks.append(Check("both halves prefer the result" + tag, better,
                             "score of each half, seed -> result: " + ", ".join(detail)))
@@ -314,7 +381,9 @@ def evidence(
     probe = replace(settings, stages=tuple(
         replace(st, max_points=None if st.max_points is None else st.max_points // 2)
         for st in settings.schedule(final.camera.width, final.camera.height)))
-    other = refine(final, start, probe, cancel)
+    steps.next("a second start, mirrored through the result")
+    other = refine(final, start, probe, cancel, steps.within)
+    steps.check()
     deg, m = other.error_to(res)
     checks.append(Check("second start (rotation)" + tag, deg <= limit_deg,
                         f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {limit_deg:.2f})"))

@@ -17,6 +17,7 @@ import yaml
 
 from app_fixtures import free_port, launch_browser, need_chromium, new_context, screenshot, wait_for, write_small_scenes
 from l2e_studio.app.pose import extrinsic_from_sliders
+from l2e_studio.app.text import score_num
 from l2e_studio.io.cameras import load_seed
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(240)]
@@ -147,7 +148,7 @@ def test_page_loads_with_panels_overlay_and_scene_list(page, app):
     size = page.evaluate("() => { const i = document.querySelector(\"img[src^='blob:']\"); return [i.naturalWidth, i.naturalHeight]; }")
     assert size == [app.camera.width, app.camera.height]
     wait_for(lambda: app.reading is not None, what="the first MI reading")
-    first_mi = f"{app.reading.per_scene[0]:.4f}"
+    first_mi = score_num(app.reading.per_scene[0])
     page.get_by_role("cell", name=first_mi).first.wait_for()
     screenshot(page, "01_loaded")
 
@@ -189,15 +190,16 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
     r = snap.result
     assert snap.run.status == "done" and not r.cancelled
     assert r.score_result > r.score_seed
-    # the MI curve: data on the server, a drawn uPlot in the page
+    # the curve: the best point on the readout's scale, ending on the result; a drawn uPlot in the page
     assert len(snap.run.history) == r.evaluations > 1
-    wait_for(lambda: len(app.optimise.plot.data[0]) == len(snap.run.history), what="the curve's data")
+    assert snap.run.best_curve[-1] == (r.evaluations, pytest.approx(r.score_result, rel=1e-9, abs=1e-12))
+    wait_for(lambda: len(app.optimise.plot.data[0]) == len(snap.run.best_curve), what="the curve's data")
     assert app.optimise.plot.visible
     assert page.locator(".uplot canvas").first.is_visible()
     screenshot(page, "03_optimised")
 
     open_tab(page, "Result")
-    page.get_by_text(f"{r.score_result:.4f}").first.wait_for()
+    page.get_by_text(score_num(app.result_scores.accepted.score)).first.wait_for()
     # the verdict, in words, beside the result
     v = snap.verdict
     assert v is not None
@@ -224,7 +226,7 @@ def test_optimisation_runs_to_completion_and_saves(page, app):
 
     open_tab(page, "Before / after")
     wait_for(lambda: app.compare.frames >= 1, what="the before/after image")
-    page.get_by_text("(seed) ->").first.wait_for()
+    page.get_by_text("(seed) →").first.wait_for()
     screenshot(page, "04_before_after")
 
     open_tab(page, "Result")

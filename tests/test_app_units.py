@@ -189,7 +189,7 @@ def test_session_state_rules():
     assert st.record_progress(run, 1, 0.2, 0.2, best, 0.1)
     assert not st.record_progress(run + 7, 2, 0.3, 0.3, best, 0.2)  # stale run: ignored
     snap = st.snapshot()
-    assert snap.run.history == ((1, 0.2, 0.2),) and snap.shown_extrinsic is best  # following the best
+    assert snap.run.history == ((1, 0.2, 0.2, 0),) and snap.shown_extrinsic is best  # following the best
     st.set_follow_best(False)
     assert st.snapshot().shown_extrinsic is moved
 

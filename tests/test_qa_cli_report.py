@@ -144,7 +144,9 @@ def test_report_is_self_contained_and_holds_every_section(report):
     assert "<script src" not in text and "<link" not in text
     for needle in ("TRUSTED", "held-out MI above the seed", "static_transform_publisher --x", "&lt;joint name=", "T_cam_lidar",
                    "scene_004 (held out)", "Pooled by group", "curvature (Hessian + scene jackknife)",
-                   "true error of the result", "repeatability spread (SLSQP", "L-BFGS-B", "sha256", "camera.yaml"):
+                   "true error of the result", "repeatability spread (SLSQP", "L-BFGS-B", "sha256", "camera.yaml",
+                   "TRUSTED: the result passed every check", "result (handed back)", "drx (deg)",
+                   "scene_000 (event map)", "coloured by intensity over the event map", "# status: trusted"):
         assert needle in text, needle
     data = json.loads(text.split('id=\'l2e-qa-data\'>')[1].split("</script>")[0].replace("<\\/", "</"))
     assert data["verdict"]["trusted"] is True

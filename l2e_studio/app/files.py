@@ -66,9 +66,10 @@ def save_result(
     held_out: Sequence[HeldOutScore] = (),
     verdict: Verdict | None = None,
     maps: dict[str, dict] | None = None,
+    judging_cancelled: bool = False,
 ) -> tuple[Path, Path | None]:
-    """Write the result file (YAML, with the ``verdict`` when there is one, and ``maps``: how
-    each scene's map was made) and, when given, the before/after image beside it.
+    """Write the result file (YAML, with the ``verdict``, or ``not judged`` and why, and
+    ``maps``: how each scene's map was made) and, when given, the before/after image beside it.
 
     Held-out scenes (scored, not optimised over) are listed in ``mi.per_scene`` with
     ``held_out: true`` and by name in ``scenes_held_out``; ``scenes`` stays the optimised ones.
@@ -80,12 +81,12 @@ def save_result(
         raise InputError(folder, f"cannot create the results folder ({exc.strerror})") from None
     path = fresh_path(folder, "l2e_result", ".yaml")
     if held_out:
-        doc = result_to_dict(result, camera, scenes_dir, verdict=verdict, maps=maps)
+        doc = result_to_dict(result, camera, scenes_dir, verdict=verdict, maps=maps, judging_cancelled=judging_cancelled)
         doc["score"]["per_scene"] += held_out_section(held_out)
         doc["scenes_held_out"] = [r.name for r in held_out]
         atomic_write_bytes(path, dumps(doc, path), keep_existing=True)
     else:
-        write_result(path, result, camera, scenes_dir, verdict=verdict, maps=maps)
+        write_result(path, result, camera, scenes_dir, verdict=verdict, maps=maps, judging_cancelled=judging_cancelled)
     png = None
     if before_after is not None:
         png = path.with_name(path.stem + "_before_after.png")

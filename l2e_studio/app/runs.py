@@ -18,8 +18,8 @@ import numpy as np
 
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
 from ..geometry import Extrinsic
-from ..verdict import Verdict, judge
-from .text import num, score_label
+from ..verdict import JudgeProgress, JudgingCancelled, Verdict, judge
+from .text import change, score_label, score_num
 from .workers import Ticker
 
 if TYPE_CHECKING:
@@ -31,17 +31,20 @@ log = logging.getLogger(__name__)
 PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
 
 OnProgress = Callable[[Progress], None]
+OnJudging = Callable[[JudgeProgress], None]
 
 
 @dataclass(frozen=True)
 class Method:
     """One way to calibrate. ``solve(stack, seed, on_progress, cancel)`` returns the result over
-    the included scenes (``stack``); ``judge(stack, result, cancel)`` its verdict, or None when it
-    cannot be judged. ``judging`` is the status line shown while the verdict is computed."""
+    the included scenes (``stack``); ``judge(stack, result, cancel, on_judging)`` its verdict, or
+    None when it cannot be judged (raising :class:`JudgingCancelled` once ``cancel`` is set;
+    ``on_judging`` takes its :class:`JudgeProgress`). ``judging`` is the status line shown while
+    the verdict is computed."""
 
     name: str
     solve: Callable[["SceneStack", Extrinsic, OnProgress, threading.Event], CalibrationResult]
-    judge: Callable[["SceneStack", CalibrationResult, threading.Event], Verdict | None]
+    judge: Callable[["SceneStack", CalibrationResult, threading.Event, OnJudging], Verdict | None]
     judging: str = "Judging the result..."
 
 
@@ -51,8 +54,9 @@ def targetless(settings: CalibrationSettings) -> Method:
     def solve(stack: "SceneStack", seed: Extrinsic, on_progress: OnProgress, cancel: threading.Event) -> CalibrationResult:
         return calibrate(stack, None, seed, settings, on_progress, cancel)
 
-    def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event) -> Verdict | None:
-        return judge(stack, result, settings, cancel=cancel)
+    def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event,
+                 on_judging: OnJudging) -> Verdict | None:
+        return judge(stack, result, settings, cancel=cancel, on_progress=on_judging)
 
     return Method("Optimisation", solve, judge_it,
                   "Judging the result: halves, a second start, a second score...")
@@ -67,6 +71,8 @@ class Runner:
         self._thread: threading.Thread | None = None
         self._ticker: Ticker | None = None
         self._method: Method | None = None
+        self._run_id, self._mask = 0, np.zeros(0, dtype=bool)
+        self._scored_best: Extrinsic | None = None  # the last best point put on the common-scale curve
 
     def start(self, method: Method) -> int:
         """Start ``method`` on the included scenes from the current extrinsic (RuntimeError while
@@ -80,6 +86,8 @@ class Runner:
         snap = app.state.snapshot()
         cancel = threading.Event()
         self._cancel, self._method = cancel, method
+        self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
+        self._score_best()  # the curve starts at the seed, on the readout's scale
 
         def on_progress(p: Progress) -> None:
             app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
@@ -90,7 +98,9 @@ class Runner:
                 stack = app.readout.stack.subset(np.asarray(snap.included, dtype=bool))
                 result = method.solve(stack, snap.extrinsic, on_progress, cancel)
                 app.result_maps = maps
-                app.state.finish_run(run_id, result, verdict=self._judge(method, stack, result, cancel))
+                self._score_best(result.extrinsic, result.evaluations)  # the curve ends on the result
+                verdict, judging_cancelled = self._judge(method, stack, result, cancel, run_id)
+                app.state.finish_run(run_id, result, verdict=verdict, judging_cancelled=judging_cancelled)
             except Exception as exc:  # shown to the user; the app keeps running
                 log.exception("%s failed", method.name.lower())
                 app.state.finish_run(run_id, error=f"{type(exc).__name__}: {exc}")
@@ -104,17 +114,20 @@ class Runner:
         return run_id
 
     def _judge(self, method: Method, stack: "SceneStack", result: CalibrationResult,
-               cancel: threading.Event) -> Verdict | None:
-        """The verdict on a finished run (none for a cancelled one: it is not an answer)."""
+               cancel: threading.Event, run_id: int) -> tuple[Verdict | None, bool]:
+        """The verdict on a finished run (none for a cancelled one: it is not an answer), and
+        whether its judging was cancelled (then it is not judged either)."""
         if result.cancelled:
-            return None
+            return None, False
         self.app.optimise.show_status(method.judging)
         try:
-            verdict = method.judge(stack, result, cancel)
+            verdict = method.judge(stack, result, cancel, lambda p: self.app.state.record_judging(run_id, p))
+        except JudgingCancelled:
+            return None, True
         except Exception:  # the result stands without a verdict rather than being lost
             log.exception("judging the result failed")
-            return None
-        return None if cancel.is_set() else verdict
+            return None, False
+        return (None, True) if cancel.is_set() else (verdict, False)
 
     def cancel(self) -> bool:
         """Ask the running calibration to stop (it returns its best point so far)."""
@@ -136,7 +149,25 @@ class Runner:
             return not t.is_alive()
         return True
 
+    def _score_best(self, best: Extrinsic | None = None, evaluations: int | None = None) -> None:
+        """Put the run's best point on the curve, scored like the readout (final smoothing,
+        every point of the included scenes): one scale for every stage, whatever each stage's
+        own smoothing (a coarse stage's score is larger, and falls at the next stage's start)."""
+        run = self.app.state.snapshot().run
+        best = best if best is not None else run.best
+        if best is None or best is self._scored_best:
+            return
+        self._scored_best = best
+        try:
+            score = self.app.readout.read(best, self._mask).total
+        except Exception:  # a curve point is not worth failing the run over
+            log.exception("scoring the best point failed")
+            return
+        self.app.state.record_best_score(self._run_id, run.evaluations if evaluations is None else evaluations, score)
+
     def _push_progress(self) -> None:
+        if self.app.state.snapshot().run.judging is None:
+            self._score_best()
         snap = self.app.state.snapshot()
         self.app.optimise.show_progress(snap.run)
         if snap.follow_best:
@@ -157,13 +188,17 @@ class Runner:
             app.notify_all(f"{name} failed", run.error, color="red")
         elif snap.result is not None:
             r: CalibrationResult = snap.result
-            verb = "cancelled" if r.cancelled else "finished"
             v = snap.verdict
+            verb = ("cancelled" if r.cancelled else "finished, judging cancelled: not judged" if snap.judging_cancelled
+                    else "finished")
+            scores = app.result_scores
+            at = scores.accepted.score if scores is not None else r.score_result
             app.notify_all(
                 f"{name} {verb}",
-                f"{score_label(r.objective)} {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} "
-                f"evaluations ({r.seconds:.1f} s)." + (f" Verdict: {v.summary()}." if v is not None else "")
+                f"{score_label(r.objective)} {score_num(r.score_seed)} -> {score_num(at)} ({change(at, r.score_seed)}) "
+                f"after {r.evaluations} evaluations ({r.seconds:.1f} s)."
+                + (f" Verdict: {v.summary()}." if v is not None else " Verdict: not judged.")
                 + " See the Result tab and Before / after.",
-                color="yellow" if r.cancelled or (v is not None and v.status == "trusted-rotation")
-                else "red" if v is not None and not v.trusted else "green",
+                color="yellow" if v is None or v.status == "trusted-rotation"
+                else "red" if not v.trusted else "green",
             )

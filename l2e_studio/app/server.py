@@ -25,6 +25,7 @@ from ..io.events import Accumulation, EventStats
 from ..scenes import Scene, SceneSet
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
+from .handback import ResultScores, result_scores
 from .heldout import HeldOutScore, held_out_scores
 from .pairs import Pair
 from .panels.compare import ComparePanel
@@ -72,6 +73,7 @@ class App:
                                       self._map_rebuilt, self._rebuild_finished)
         self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
+        self.result_scores: ResultScores | None = None  # the last result's answers, on the readout's scale
         self._reference_mi: dict[tuple, float] = {}
         self.runner = Runner(self)
         self.overlay_seconds: list[float] = []  # server-side render+encode time of each frame
@@ -350,9 +352,15 @@ class App:
         return self.runner.wait(timeout)
 
     def result_shown(self, snap) -> None:
-        """A run ended: score its held-out scenes and show the result everywhere."""
+        """A run ended: score its held-out scenes and its answers, and show the result everywhere."""
         self.held_out = self._score_held_out(snap.result)
-        self.results.show(snap, self.held_out)
+        try:
+            self.result_scores = result_scores(snap, self.state.scene_names, self.readout)
+        except Exception:  # a score is not worth losing the result over
+            log.exception("scoring the result's answers failed")
+            self.result_scores = None
+        self.results.show(snap, self.held_out, self.result_scores)
+        self.optimise.show_handed_back(self.result_scores)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
@@ -383,7 +391,7 @@ class App:
         maps = {name: (now if name in {h.name for h in held} else self.result_maps).get(name, now.get(name))
                 for name in self.state.scene_names}
         return save_result(self.out_dir, snap.result, self.camera, Path(self.scene_set.root), image, held,
-                           snap.verdict, maps)
+                           snap.verdict, maps, snap.judging_cancelled)
 
     def set_out_dir(self, text: str) -> str:
         """Use the folder ``text`` for results and seeds from now on; returns a note ("" if none).
@@ -397,7 +405,7 @@ class App:
 
     def discard_result(self) -> None:
         self.state.discard_result()
-        self.held_out = []
+        self.held_out, self.result_scores = [], None
         self.results.show(self.state.snapshot())
         self.compare_worker.poke()
         self.mi_worker.poke()

@@ -20,7 +20,11 @@ from .history import History
 
 @dataclass(frozen=True)
 class RunState:
-    """Where the optimisation stands. ``history`` holds (evaluation, MI, best MI) rows."""
+    """Where the optimisation stands. ``history`` holds (evaluation, score, best score, stage)
+    rows on the stage's own smoothing; ``best_curve`` (evaluation, score) rows of the best point
+    so far scored on one common scale (the readout's: final smoothing, every point), which is
+    what the curve plots; ``judging``: the verdict's progress once the optimiser is done (a
+    :class:`l2e_studio.verdict.JudgeProgress`, None before)."""
 
     status: str = "idle"
     evaluations: int = 0
@@ -30,7 +34,9 @@ class RunState:
     mi: float = float("nan")
     best_mi: float = float("nan")
     best: Extrinsic | None = None
-    history: tuple[tuple[int, float, float], ...] = ()
+    history: tuple[tuple[int, float, float, int], ...] = ()
+    best_curve: tuple[tuple[int, float], ...] = ()
+    judging: Any = None
     error: str = ""
     started: float = 0.0
     finished: float = 0.0
@@ -55,6 +61,7 @@ class Snapshot:
     follow_best: bool
     showing_result: bool = False
     verdict: Any = None  # the verdict.Verdict on ``result`` (None: cancelled, failed, or not judged)
+    judging_cancelled: bool = False  # the run finished but its judging was cancelled (not judged)
 
     @property
     def shown_extrinsic(self) -> Extrinsic:
@@ -63,8 +70,27 @@ class Snapshot:
         if self.run.active and self.follow_best and self.run.best is not None:
             return self.run.best
         if self.showing_result and self.result is not None:
-            return self.result.extrinsic
+            return self.accepted
         return self.extrinsic
+
+    @property
+    def handed_back(self) -> Extrinsic | None:
+        """What the result hands back in the saved file and the exports: the verdict's extrinsic
+        (for ``trusted-rotation`` the rotation with the seed's translation, for ``not-trusted``
+        the seed), else the optimiser's own answer; None without a result."""
+        if self.result is None:
+            return None
+        return self.verdict.extrinsic if self.verdict is not None else self.result.extrinsic
+
+    @property
+    def accepted(self) -> Extrinsic | None:
+        """What Accept sets (and Before / after shows as "result"): what a trusting verdict hands
+        back, else the optimiser's own answer (accepting an untrusted one is the user's call)."""
+        if self.result is None:
+            return None
+        if self.verdict is not None and self.verdict.trusted:
+            return self.verdict.extrinsic
+        return self.result.extrinsic
 
 
 @dataclass
@@ -79,6 +105,7 @@ class SessionState:
     run: RunState = field(default_factory=RunState)
     result: Any = None  # a calibrate.CalibrationResult once a run finishes
     verdict: Any = None  # its verdict.Verdict, when it was judged
+    judging_cancelled: bool = False  # its judging was cancelled: not judged
     follow_best: bool = True
     showing_result: bool = False  # the overlay stays on a run's result until the next change
     version: int = 0
@@ -110,6 +137,7 @@ class SessionState:
                 self.follow_best,
                 self.showing_result,
                 self.verdict,
+                self.judging_cancelled,
             )
 
     # --- the extrinsic ---------------------------------------------------------------------
@@ -193,7 +221,7 @@ class SessionState:
         with self._lock:
             if run_id != self.run.run_id or not self.run.active:
                 return False
-            row = (int(evaluations), float(mi), float(best_mi))
+            row = (int(evaluations), float(mi), float(best_mi), int(stage))
             self.run = replace(
                 self.run,
                 evaluations=int(evaluations),
@@ -208,15 +236,34 @@ class SessionState:
             self._bump()
             return True
 
-    def finish_run(self, run_id: int, result: Any = None, error: str = "", verdict: Any = None) -> bool:
+    def record_best_score(self, run_id: int, evaluations: int, score: float) -> bool:
+        """Add a point of the best-so-far curve on the common scale; False if ``run_id`` is stale."""
+        with self._lock:
+            if run_id != self.run.run_id or not np.isfinite(score):
+                return False
+            self.run = replace(self.run, best_curve=self.run.best_curve + ((int(evaluations), float(score)),))
+            self._bump()
+            return True
+
+    def record_judging(self, run_id: int, progress: Any) -> bool:
+        """The verdict's progress (a ``JudgeProgress``) on the running run; False if stale."""
+        with self._lock:
+            if run_id != self.run.run_id or not self.run.active:
+                return False
+            self.run = replace(self.run, judging=progress)
+            self._bump()
+            return True
+
+    def finish_run(self, run_id: int, result: Any = None, error: str = "", verdict: Any = None,
+                   judging_cancelled: bool = False) -> bool:
         """Close the run with its result (``result.cancelled`` marks a cancel) and its verdict,
-        or an error."""
+        or an error; ``judging_cancelled``: the run finished, its judging was cancelled."""
         with self._lock:
             if run_id != self.run.run_id:
                 return False
             if error:
                 status = "failed"
-            elif result is not None and getattr(result, "cancelled", False):
+            elif result is not None and (getattr(result, "cancelled", False) or judging_cancelled):
                 status = "cancelled"
             else:
                 status = "done"
@@ -226,6 +273,7 @@ class SessionState:
             if result is not None:
                 self.result = result
                 self.verdict = verdict
+                self.judging_cancelled = bool(judging_cancelled)
                 self.showing_result = self.follow_best
             self._bump()
             return True
@@ -238,7 +286,7 @@ class SessionState:
         with self._lock:
             if self.result is None:
                 raise RuntimeError("there is no result to accept")
-            chosen = self.verdict.extrinsic if self.verdict is not None and self.verdict.trusted else self.result.extrinsic
+            chosen = self.snapshot().accepted
             self.set_extrinsic(chosen, "accept")
             return chosen
 
@@ -246,6 +294,7 @@ class SessionState:
         with self._lock:
             self.result = None
             self.verdict = None
+            self.judging_cancelled = False
             self.showing_result = False
             self._bump()
 

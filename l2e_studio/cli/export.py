@@ -9,7 +9,8 @@ from pathlib import Path
 from ..errors import InputError
 
 NAME = "export"
-HELP = "Write a calibration as 4x4 text, ROS 1/ROS 2 static_transform_publisher, URDF joint, Kalibr YAML, YAML or JSON."
+HELP = ("Write a calibration as 4x4 text, ROS 1/ROS 2 static_transform_publisher, URDF joint, Kalibr YAML, YAML or "
+        "JSON, each stating the result's verdict (for trusted-rotation: that the translation is the seed's).")
 #: The engine's export formats, written out so that ``--help`` needs no engine import
 #: (tests/test_packaging.py checks them against :data:`l2e_studio.export.EXPORT_FORMATS`).
 FORMAT_NAMES = ("yaml", "json", "matrix", "ros1", "ros2", "urdf", "kalibr")
@@ -22,10 +23,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="output file (one format) or folder (several); default: print to stdout")
     p.add_argument("--camera-frame", default="camera", help="camera frame / link name (default: %(default)s)")
     p.add_argument("--lidar-frame", default="lidar", help="lidar frame / link name (default: %(default)s)")
+    p.add_argument("--require-trusted", action="store_true",
+                   help="refuse (exit 2, nothing written) unless the result's verdict is 'trusted': for pipelines "
+                        "that must not ship a seed's translation (trusted-rotation) or an unjudged result")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..export import EXPORT_FORMATS, export_text
+    from ..export import EXPORT_FORMATS, export_status, export_text
     from ..io.cameras import load_seed
     from ._qa_common import check_writable, read_doc, write
 
@@ -47,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
             result = doc if "T_cam_lidar" in doc else None
         except InputError:
             result = None
+    status, notes = export_status(result)
+    if args.require_trusted and status != "trusted":
+        raise InputError(args.input, f"the verdict is '{status}', not 'trusted' (--require-trusted); nothing written")
     texts = {f: export_text(ext, f, args.camera_frame, args.lidar_frame, result=result) for f in fmts}
     if args.out is None:
         for f, t in texts.items():
@@ -63,4 +70,6 @@ def run(args: argparse.Namespace) -> int:
     for f, path in targets.items():
         backup = write(path, texts[f].encode())
         print(f"{f}: {path}" + (f" (previous file kept as {backup})" if backup else ""))
+    for line in notes:
+        print(line)
     return 0

@@ -105,7 +105,7 @@ def _plt():
     return plt
 
 
-def landscape_figure(sweeps: list) -> str:
+def landscape_figure(sweeps: list, label: str = "MI (nats)") -> str:
     plt = _plt()
     fig, axs = plt.subplots(2, 3, figsize=(11, 5.5))
     for ax, s in zip(axs.ravel(), sweeps):
@@ -114,12 +114,12 @@ def landscape_figure(sweeps: list) -> str:
         ax.axvline(0, color="k", lw=0.8, ls="--")
         ax.set_title(f"{s.axis}: half width {s.half_width():.3g} {unit}", fontsize=9)
         ax.set_xlabel(f"offset ({unit})")
-        ax.set_ylabel("MI (nats)")
+        ax.set_ylabel(label)
     fig.tight_layout()
     return _fig_uri(fig)
 
 
-def landscape2d_figure(sw) -> str:
+def landscape2d_figure(sw, label: str = "MI (nats)") -> str:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5.5, 4.5))
     oa, ob = sw.offsets
@@ -127,7 +127,7 @@ def landscape2d_figure(sw) -> str:
     ax.plot([0], [0], "r+", ms=12)
     ax.set_xlabel(f"{sw.axes[1]} offset ({'m' if sw.axes[1] in AXES[:3] else 'deg'})")
     ax.set_ylabel(f"{sw.axes[0]} offset ({'m' if sw.axes[0] in AXES[:3] else 'deg'})")
-    fig.colorbar(im, ax=ax, label="MI (nats)")
+    fig.colorbar(im, ax=ax, label=label)
     return _fig_uri(fig)
 
 

@@ -92,16 +92,20 @@ def few_scenes(n_scenes: int, std: np.ndarray | None = None, wanted_mm: float | 
     return out
 
 
-def flat_landscape(sweeps: list, max_half_width_m: float = 0.04, max_half_width_deg: float = 1.5,
+def flat_landscape(sweeps: list, score: str = "MI", max_half_width_m: float = 0.04, max_half_width_deg: float = 1.5,
                    ambiguous: float = 0.9) -> list[Warning]:
+    """A flat axis, or a second local maximum on a 1-D sweep through the result (``score``: its name)."""
     out = []
     for s in sweeps:
         limit = max_half_width_m if s.axis in AXES[:3] else max_half_width_deg
         if s.half_width() >= limit:
-            out.append(Warning("flat", f"the MI is flat along {s.axis} (half width {s.half_width():.3g} "
+            out.append(Warning("flat", f"the {score} is flat along {s.axis} (half width {s.half_width():.3g} "
                                f"{'m' if s.axis in AXES[:3] else 'deg'})"))
         if s.secondary_ratio() >= ambiguous:
-            out.append(Warning("ambiguous", f"a second peak along {s.axis} reaches {100 * s.secondary_ratio():.0f}% of the main one"))
+            unit = "m" if s.axis in AXES[:3] else "deg"
+            out.append(Warning("ambiguous", f"on the 1-D sweep of the {score} along {s.axis} through the result "
+                               f"(+-{s.offsets[-1]:.3g} {unit}), a second local maximum reaches "
+                               f"{100 * s.secondary_ratio():.0f}% of the main one's height above the sweep's minimum"))
     return out
 
 

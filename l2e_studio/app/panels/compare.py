@@ -12,7 +12,7 @@ from ..context import Workbench
 from ..exact import parse_number
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
-from ..text import num, score_label
+from ..text import change, score_label, score_num
 
 if TYPE_CHECKING:
     from .overlay_view import OverlayPanel
@@ -56,7 +56,7 @@ class ComparePanel:
             return None
         style = self.overlay.style()
         before = self.overlay.draw(snap.selected, result.seed, style)
-        after = self.overlay.draw(snap.selected, result.extrinsic, style)
+        after = self.overlay.draw(snap.selected, snap.accepted, style)  # "result": what Accept sets
         return compose_before_after(before, after, mode or self.mode.value, float(self.amount.value), scale)
 
     def render(self) -> None:
@@ -68,16 +68,28 @@ class ComparePanel:
             return
         r = snap.result
         name = self.app.state.scene_names[snap.selected]
-        try:
-            k = list(r.scene_names).index(name)
-            scores = (f"{score_label(r.objective)} of this scene {num(r.score_seed_per_scene[k])} (seed) -> "
-                      f"{num(r.score_result_per_scene[k])} (result)")
-        except ValueError:  # held out of the optimisation: score it with the readout's stack
-            everything = [True] * len(self.app.state.scene_names)
-            score_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
-            mi_res = self.app.readout.read(r.extrinsic, everything).per_scene[snap.selected]
-            scores = f"held out of the optimisation; {score_label(r.objective)} {num(score_seed)} (seed) -> {num(mi_res)} (result)"
+        label = score_label(r.objective)
+        # both scored by the readout, like the Seed tab and the Result tab
+        everything = [True] * len(self.app.state.scene_names)
+        at_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]
+        at_res = self.app.readout.read(snap.accepted, everything).per_scene[snap.selected]
+        held = "" if name in r.scene_names else " (held out of the optimisation)"
+        scores = (f"{label} of this scene{held} {score_num(at_seed)} (seed) → {score_num(at_res)} (result, "
+                  f"{change(at_res, at_seed)})  \n"
+                  f"left/before: the run's seed · right/after, \"result\": {result_words(snap)}")
         self.caption.content = f"**{name}**: {scores}"
         self.image.image = img
         self.image.visible = True
         self.frames += 1
+
+
+def result_words(snap: Snapshot) -> str:
+    """Which transform the "result" side shows: what Accept sets."""
+    v = snap.verdict
+    if v is None:
+        return "the optimiser's answer, not judged"
+    if v.status == "trusted":
+        return "the optimiser's answer (trusted)"
+    if v.status == "trusted-rotation":
+        return "the checked rotation with the seed's translation (what is handed back; the optimiser's translation is not)"
+    return "the optimiser's answer, NOT trusted (the saved file keeps the seed)"

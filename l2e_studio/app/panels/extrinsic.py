@@ -15,7 +15,7 @@ from ..files import save_seed, seed_document, seed_from_upload
 from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_extrinsic
 from ..readout import MiReading
 from ..state import Snapshot
-from ..text import num
+from ..text import change, score_num
 
 #: Step choices: (metres, degrees).
 STEPS = {
@@ -185,7 +185,7 @@ class ExtrinsicPanel:
         n_in = sum(snap.included)
         delta = reading.total - reference_mi
         self.readout.content = (
-            f"**{self.app.readout.label} · {name}: {num(reading.per_scene[snap.selected])}**  \n"
-            f"**{self.app.readout.label} · {n_in} included scenes: {num(reading.total)}** "
-            f"({num(delta, signed=True)} vs file seed)"
+            f"**{self.app.readout.label} · {name}: {score_num(reading.per_scene[snap.selected])}**  \n"
+            f"**{self.app.readout.label} · {n_in} included scenes: {score_num(reading.total)}** "
+            f"({score_num(delta, signed=True)}, {change(reading.total, reference_mi)} vs file seed)"
         )

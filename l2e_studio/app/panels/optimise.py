@@ -1,4 +1,12 @@
-"""The optimisation: settings, Start / Cancel, and live progress (bar, MI curve, best pose).
+"""The optimisation: settings, Start / Cancel, and live progress (bar, score curve, best pose),
+then the judging's own steps.
+
+The curve is on one scale: the optimiser's best point (5 times a second) scored like the readout
+(the final smoothing, every point of the included scenes), the best of those so far, with the
+stage on a second axis (with the edge score's multi-start search, each new start climbs the
+stages again). Each stage's own objective scores the same point differently (its smoothing, map
+scale and points), and each start's search begins below the best so far: plotted raw, a "best"
+fell at every stage change and every new start.
 
 The run itself is :func:`l2e_studio.calibrate.calibrate` in a worker thread (see
 :meth:`App.start_run`); this panel only reads settings and shows :class:`RunState`.
@@ -16,7 +24,7 @@ from ...calibrate import METHODS, CalibrationSettings
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
-from ..text import num
+from ..text import change, score_num
 from ..state import RunState
 
 IDLE_TEXT = "Idle. Start optimises the included scenes from the current extrinsic."
@@ -60,15 +68,19 @@ class OptimisePanel:
         self.status = gui.add_markdown(IDLE_TEXT)
         # viser 1.1's client never redraws a uPlot created with empty data, so the plot starts
         # with one placeholder point and stays hidden until a run has history.
+        label = app.readout.label
         self.plot = gui.add_uplot(
             (np.zeros(1), np.zeros(1), np.zeros(1)),
             (
                 viser.uplot.Series(label="evaluation"),
-                viser.uplot.Series(label="MI", stroke="#1c7ed6", width=1),
-                viser.uplot.Series(label="best", stroke="#e8590c", width=2),
+                viser.uplot.Series(label=f"best {label} so far (any start, as the readout)", stroke="#e8590c", width=2),
+                viser.uplot.Series(label="stage", stroke="#868e96", width=1, dash=[4, 3], scale="stage"),
             ),
-            title=f"{app.readout.label} vs evaluation",
-            scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True)},
+            title=f"best {label} so far, one scale (final σ, all points) · stage",
+            scales={"x": viser.uplot.Scale(time=False, auto=True), "y": viser.uplot.Scale(auto=True),
+                    "stage": viser.uplot.Scale(auto=False, range=(0.5, 3.5))},
+            axes=(viser.uplot.Axis(), viser.uplot.Axis(label=label),
+                  viser.uplot.Axis(scale="stage", side=1, label="stage", grid={"show": False})),
             aspect=1.6,
             visible=False,
         )
@@ -147,22 +159,52 @@ class OptimisePanel:
         self.progress.animated = running
         self.show_start()
 
+    def show_handed_back(self, scores) -> None:
+        """After the run: what is handed back and its score, as the Result tab and the readout show it."""
+        if scores is None:
+            return
+        a = scores.accepted
+        self.status.content += (f"  \n**After Accept**: {a.what} · {self.app.readout.label} {score_num(a.score)} "
+                                f"({change(a.score, scores.seed.score)} vs the seed; details in the Result tab)")
+
     def show_progress(self, run: RunState) -> None:
-        self.progress.value = float(np.clip(100.0 * run.fraction, 0.0, 100.0))
-        if run.history:
-            h = np.asarray(run.history, dtype=np.float64)
-            self.plot.data = (h[:, 0], h[:, 1], h[:, 2])
+        label = self.app.readout.label
+        if run.best_curve:
+            self.plot.data = curve_data(run)
             self.plot.visible = True
         elapsed = (run.finished or time.time()) - run.started if run.started else 0.0
-        stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
-        if run.active and self.app.cancel_requested():
-            head = "**Cancelling...**"
+        cancelling = run.active and self.app.cancel_requested()
+        head = "**Cancelling...**" if cancelling else STATUS_WORDS[run.status]
+        if run.status == "cancelled" and run.judging is not None:
+            head = "■ **Cancelled while judging**: the optimiser finished, its result is **not judged**"
+        best, seed = (run.best_curve[-1][1], run.best_curve[0][1]) if run.best_curve else (None, None)
+        scored = (f"{label} of the best point {score_num(best)} ({change(best, seed)} vs the seed {score_num(seed)}; "
+                  f"final σ, all points: the readout's scale)")
+        j = run.judging
+        if run.active and j is not None:  # the optimiser is done, the verdict is being computed
+            self.progress.value = float(np.clip(100.0 * j.fraction, 0.0, 100.0))
+            text = (f"{'**Cancelling...**' if cancelling else '**Judging the result**'} · step {j.step}/{j.steps}: "
+                    f"{j.label} · {j.elapsed:.1f} s  \n{scored}")
         else:
-            head = STATUS_WORDS[run.status]
-        text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n"
-                f"objective {self.app.readout.label} {num(run.mi)} · best {num(run.best_mi)}")
+            self.progress.value = float(np.clip(100.0 * run.fraction, 0.0, 100.0))
+            stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
+            text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n{scored}  \n"
+                    f"<small>this stage's own objective (its smoothing, its points; not comparable across "
+                    f"stages): {score_num(run.mi)}, best {score_num(run.best_mi)}</small>")
         if run.error:
             text += f"  \n{run.error}"
         self.status.content = text
         if run.best is not None:
             self.best_text.content = f"Best so far: {describe(run.best, self.app.state.reference)}"
+
+
+def curve_data(run: RunState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(evaluation, best score so far on the common scale, stage number 1..) for the plot."""
+    c = np.asarray(run.best_curve, dtype=np.float64)
+    if run.history:
+        h = np.asarray(run.history, dtype=np.float64)
+        k = np.clip(np.searchsorted(h[:, 0], c[:, 0], side="right") - 1, 0, len(h) - 1)
+        stage = h[k, 3] + 1.0
+    else:
+        stage = np.ones(len(c))
+    return c[:, 0], np.maximum.accumulate(c[:, 1]), stage

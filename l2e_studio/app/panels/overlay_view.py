@@ -14,7 +14,7 @@ from ..inspect import ZOOMS, Window, cropped, depth_range, edge_view, legend_htm
 from ..overlay import COLOR_MODES, OverlayStyle, encode_jpeg, project_scene, render_overlay
 from ..readout import MiReading
 from ..state import Snapshot
-from ..text import num
+from ..text import score_num
 
 DISPLAY_WIDTH = 640  # px: previews are at most this wide; frames at rest take the panel's width
 FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
@@ -263,7 +263,7 @@ class OverlayPanel:
 
     def show_caption(self, snap: Snapshot, reading: MiReading | None) -> None:
         name = self.app.state.scene_names[snap.selected]
-        mi = "" if reading is None else f" · {self.app.readout.label} {num(reading.per_scene[snap.selected])}"
+        mi = "" if reading is None else f" · {self.app.readout.label} {score_num(reading.per_scene[snap.selected])}"
         if snap.showing_result and snap.result is not None and not snap.run.active:
             mi += " at your extrinsic"  # the reading is of the current extrinsic, not of the result shown
         note = ""

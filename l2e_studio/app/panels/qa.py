@@ -145,9 +145,12 @@ class QAPanel:
 
     # --- exports and the report --------------------------------------------------------------------------
     def export_document(self, fmt: str) -> tuple[str, bytes]:
+        """The last result as the saved file hands it back (the verdict's extrinsic, its status in
+        the header), or the current extrinsic (no verdict) without a result."""
         snap = self.app.state.snapshot()
-        ext = snap.result.extrinsic if snap.result is not None else snap.extrinsic
-        result = result_to_dict(snap.result, self.app.camera) if snap.result is not None else None
+        ext = snap.handed_back if snap.result is not None else snap.extrinsic
+        result = (result_to_dict(snap.result, self.app.camera, verdict=snap.verdict,
+                                 judging_cancelled=snap.judging_cancelled) if snap.result is not None else None)
         return f"T_cam_lidar{EXPORT_FORMATS[fmt]}", export_text(ext, fmt, result=result).encode()
 
     def _on_export(self, event) -> None:
@@ -162,12 +165,13 @@ class QAPanel:
         if snap.result is None:
             raise RuntimeError("there is no result to report on: run the optimisation first")
         ss = self.app.scene_set
-        doc = result_to_dict(snap.result, self.app.camera, ss.root)
+        doc = result_to_dict(snap.result, self.app.camera, ss.root, verdict=snap.verdict,
+                             judging_cancelled=snap.judging_cancelled)
         held = ~np.array(snap.included, dtype=bool)
         stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
         path = self.app.out_dir / f"l2e_report_{stamp}.html"
         inp = ReportInputs(ss, doc, path.with_suffix(".yaml"), settings_from_result(doc), snap.result.seed,
-                           snap.result.extrinsic, held_out=held)
+                           snap.handed_back, held_out=held)
         page, _ = build(inp)
         atomic_write_bytes(path, page.encode(), keep_existing=True)
         return path

@@ -10,9 +10,10 @@ import viser
 
 from ..context import Workbench
 from ...errors import InputError
+from ..handback import Answer, ResultScores
 from ..heldout import HeldOutScore
 from ..pose import describe
-from ..text import num, score_label
+from ..text import change, score_label, score_num
 from ..state import Snapshot
 
 NO_RESULT = "No result yet."
@@ -64,7 +65,7 @@ class ResultPanel:
         self.saved.content = f"Saved `{path}`" + (f"  \nand `{png}`" if png else "")
         self.app.notify(event.client, "Result saved", body, color="green")
 
-    def show(self, snap: Snapshot, held_out: Sequence[HeldOutScore] = ()) -> None:
+    def show(self, snap: Snapshot, held_out: Sequence[HeldOutScore] = (), scores: ResultScores | None = None) -> None:
         r = snap.result
         has = r is not None
         self.accept.disabled = not has
@@ -82,20 +83,42 @@ class ResultPanel:
         # Only a result the verdict trusts gets the green "go": a cancelled run's point is not a
         # converged result, and an untrusted one is accepted only on the user's own judgement.
         self.accept.color, self.accept.label = accept_style(cancelled, v)
-        err_deg, err_m = r.seed.error_to(r.extrinsic)
         state = ("■ **Run cancelled**: the best point so far, not a converged result" if cancelled
+                 else "■ **Run finished, judging cancelled**" if snap.judging_cancelled
                  else "✓ **Run finished**")
         label = score_label(r.objective)
-        self.summary.content = (
-            f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
-            + (verdict_text(v) + "  \n" if v is not None else "")
-            + f"**{label} {num(r.score_seed)} → {num(r.score_result)}** "
-            f"({num(r.score_result - r.score_seed, signed=True)}) over "
-            f"{len(r.scene_names)} scenes" + (f", {len(held_out)} held out" if held_out else "") + "  \n"
-            f"moved {err_deg:.3f}° / {100 * err_m:.2f} cm from its seed  \n"
-            f"{describe(r.extrinsic, self.app.state.reference)}"
-        )
-        self.table.content = result_table(r, held_out)
+        if scores is None:  # not scored on the readout's scale: the run's own numbers
+            scores = ResultScores(Answer("the run's seed", r.seed, r.score_seed),
+                                  Answer("the optimiser's own answer", r.extrinsic, r.score_result),
+                                  *(2 * [Answer("the optimiser's answer", r.extrinsic, r.score_result)]),
+                                  per_scene_accepted=None)
+        seed = scores.seed.score
+
+        def line(head: str, a: Answer, what: bool = True) -> str:
+            deg, m = r.seed.error_to(a.extrinsic)
+            return (f"**{head}**: " + (f"{a.what} · " if what else "")
+                    + f"**{label} {score_num(a.score)}** ({change(a.score, seed)} vs the "
+                    f"run's seed {score_num(seed)}) · moved {deg:.3f}° / {100 * m:.2f} cm from the seed")
+
+        lines = [f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s · "
+                 f"{len(r.scene_names)} scenes" + (f", {len(held_out)} held out" if held_out else ""),
+                 verdict_text(v) if v is not None else not_judged_text(cancelled or snap.judging_cancelled)]
+        if scores.accepted.extrinsic is scores.file.extrinsic:
+            lines.append(line("Handed back (Accept, Save, exports)", scores.accepted))
+        else:  # not trusted: the file keeps the seed, Accept is the user's call
+            lines.append(line("Saved file and exports hand back", scores.file))
+            lines.append(line("Accept sets", scores.accepted))
+        if not scores.same:
+            lines.append(line("The optimiser's own answer (not handed back)", scores.optimiser, what=False))
+        lines.append(f"After Accept: {describe(scores.accepted.extrinsic, self.app.state.reference)}")
+        self.summary.content = "  \n".join(lines)
+        self.table.content = result_table(r, held_out, scores.per_scene_accepted, self.app.state.scene_names)
+
+
+def not_judged_text(cancelled: bool) -> str:
+    """The verdict line of a result without a verdict (markdown)."""
+    why = "the run or its judging was cancelled" if cancelled else "judging failed (see the log)"
+    return f"◌ **Verdict: not judged**: {why}; nothing vouches for this result"
 
 
 VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "✗"}
@@ -112,7 +135,7 @@ def verdict_text(verdict) -> str:
 def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
     """(colour, label) of the Accept button for a run's result and its verdict."""
     if cancelled:
-        return "yellow", "Accept best-so-far as seed"
+        return "yellow", "Accept best-so-far as seed (not judged)"
     if verdict is None:
         return "yellow", "Accept as seed (not judged)"
     if verdict.status == "trusted":
@@ -122,15 +145,22 @@ def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
     return "red", "Accept anyway (not trusted)"
 
 
-def result_table(result, held_out: Sequence[HeldOutScore] = ()) -> str:
-    """Markdown: one row per optimised scene, then the held-out ones marked as such."""
+def result_table(result, held_out: Sequence[HeldOutScore] = (), accepted=None, names: Sequence[str] = ()) -> str:
+    """Markdown: one row per optimised scene, then the held-out ones marked as such. The result
+    column is what Accept sets (``accepted``: every scene's score there, in ``names`` order),
+    else the optimiser's answer."""
     label = score_label(result.objective)
-    rows = [f"| scene | {label} seed | {label} result | Δ |", "|:--|--:|--:|--:|"]
+    index = {n: i for i, n in enumerate(names)}
+    head = "after Accept" if accepted is not None else "result"
+    rows = [f"| scene | {label} seed | {label} {head} | change |", "|:--|--:|--:|--:|"]
     for name, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene):
-        rows.append(f"| {name} | {num(a)} | {num(b)} | {num(b - a, signed=True)} |")
+        if accepted is not None and name in index:
+            b = accepted[index[name]]
+        rows.append(f"| {name} | {score_num(a)} | {score_num(b)} | {change(b, a)} |")
     for h in held_out:
-        rows.append(f"| {h.name} (held out) | {num(h.score_seed)} | {num(h.score_result)} | "
-                    f"{num(h.score_result - h.score_seed, signed=True)} |")
+        rows.append(f"| {h.name} (held out) | {score_num(h.score_seed)} | {score_num(h.score_result)} | "
+                    f"{change(h.score_result, h.score_seed)} |")
     if held_out:
-        rows += ["", f"Held-out scenes were not optimised over: their {label} checks the result on unseen data."]
+        rows += ["", f"Held-out scenes were not optimised over: their {label} (at the optimiser's answer) checks "
+                     "the result on unseen data."]
     return "\n".join(rows)

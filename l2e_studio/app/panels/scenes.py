@@ -10,7 +10,7 @@ import numpy as np
 from ..browser_js import KEY_HANDLING_HTML, hide_inputs
 from ..context import Workbench
 from ..readout import MiReading
-from ..text import num
+from ..text import score_num
 
 
 SORT_KEYS = ("name", "points", "score now (high first)", "score now (low first)")
@@ -103,7 +103,7 @@ class ScenesPanel:
                              None if reading is None else reading.per_scene):
             name = self.app.state.scene_names[i]
             mark = "✓" if snap.included[i] else "–"
-            mi = "" if reading is None else num(reading.per_scene[i])
+            mi = "" if reading is None else score_num(reading.per_scene[i])
             label = f"**{name}**" if i == snap.selected else name
             rows.append(f"| {mark} | {label} | {self.app.scene_set.scenes[i].points.shape[0]} | {mi} |")
         return "\n".join(rows)
