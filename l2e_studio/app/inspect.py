@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .overlay import color_table
+from ..drawing import point_table
 
 ZOOMS = {"fit": 0, "1:1": 1, "2x": 2, "4x": 4}
 
@@ -62,7 +62,7 @@ def depth_range(depth: np.ndarray) -> tuple[float, float]:
 
 
 def _gradient(indices: np.ndarray) -> str:
-    lut = color_table("turbo")
+    lut = point_table()
     stops = ", ".join(f"rgb({r},{g},{b}) {100 * k / (len(indices) - 1):.0f}%"
                       for k, (r, g, b) in enumerate(lut[indices]))
     return f"linear-gradient(to right, {stops})"
