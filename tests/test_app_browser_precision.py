@@ -135,9 +135,9 @@ def test_meaningless_settings_are_refused_beside_the_field_and_start_says_why(pa
     open_tab(page, "Optimise")
     start = page.get_by_role("button", name="Start")
     assert start.is_enabled()
-    for label, bad, words in (("± translation (m)", "-0.1", "outside (0, 2] m"),
-                              ("± rotation (°)", "500", "500 ° is outside (0, 45]"),
-                              ("Smoothing σ (px)", "0", "outside (0, 50] px"),
+    for label, bad, words in (("± translation (m)", "-0.1", "outside [0, 5] m"),
+                              ("± rotation (°)", "500", "500 ° is outside (0, 90]"),
+                              ("Smoothing σ (px)", "-1", "outside [0, 200] px"),
                               ("Smoothing σ (px)", "nan", "is not a number")):
         field = text_field(page, label)
         good = field.input_value()
