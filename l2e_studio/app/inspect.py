@@ -3,9 +3,9 @@ with units, and an edge view (pure numpy / OpenCV, no viser).
 
 Zoom levels: ``fit`` shows the whole map; ``1:1`` a window of the display's width in map
 pixels, one map pixel per screen pixel; ``2x`` / ``4x`` half / a quarter of that window, each
-map pixel drawn as a 2x2 / 4x4 block. The window is sent at map resolution and the browser
-magnifies it without smoothing (``image-rendering: pixelated``), so no smoothing hides a
-misalignment and a 4x view costs a sixteenth of the bytes of a magnified frame.
+map pixel drawn as a 2x2 / 4x4 block. The window is magnified without smoothing (nearest
+neighbour) to the frame's width and the points are drawn into the magnified frame, so no
+smoothing hides a misalignment and a point keeps its screen size at any zoom.
 """
 
 from __future__ import annotations

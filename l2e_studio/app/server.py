@@ -192,6 +192,12 @@ class App:
             return True
         return False
 
+    def picking_changed(self, on: bool) -> None:
+        """Picking pairs for PnP started or stopped: the 3D view looks through the camera and widens."""
+        with self._ui_lock:
+            self.overlay.set_picking(on)
+            self.view3d.set_picking(on)
+
     def current_pairs(self) -> list[Pair]:
         """The clicked lidar/pixel pairs (saved with the seed)."""
         return self.pairs.pairs()

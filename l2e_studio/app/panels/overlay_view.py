@@ -26,19 +26,26 @@ CONTROLS_PX = 400  # about the width of the controls docked right (control_width
 MIN_3D_PX = 220  # what the 3D view keeps between the overlay and the controls
 MIN_PANEL_PX = 640  # the overlay panel never narrower than this
 MAX_PANEL_SHARE = 0.6  # of the window's width
+PICKING_SHARE = 0.45  # of what the controls leave, while picking pairs: the 3D view gets the rest
+MIN_PICKING_PX = 360
 
 
-def panel_layout(window_width: int) -> tuple[int, int]:
+def panel_layout(window_width: int, picking: bool = False) -> tuple[int, int]:
     """(overlay panel width, frame width) in CSS px for a window ``window_width`` wide: the
-    overlay gets what the controls and a usable 3D view leave, up to 60 % of the window."""
+    overlay gets what the controls and a usable 3D view leave, up to 60 % of the window; while
+    picking pairs, a bit less than half of what the controls leave (the 3D view is where the
+    points are picked: at 1366 px it gets ~530 px instead of ~220)."""
     window_width = min(max(int(window_width), 320), 8192)
+    if picking:
+        panel = max(MIN_PICKING_PX, int(PICKING_SHARE * (window_width - CONTROLS_PX)))
+        return panel, panel - 24
     panel = int(min(window_width - CONTROLS_PX - MIN_3D_PX, MAX_PANEL_SHARE * window_width))
     panel = max(MIN_PANEL_PX, panel)
     return panel, max(480, panel - 24)
 
 
 VIEWS = ("overlay", "edges")
-#: A zoomed window is sent at map resolution and magnified by the browser without smoothing.
+#: A zoomed window is magnified without smoothing (also where the browser scales the frame).
 IMAGE_CSS = {
     "fit": "<style>img[src^='blob:'] { width: 100% !important; }</style>",
     "zoomed": "<style>img[src^='blob:'] { width: 100% !important; image-rendering: pixelated; }</style>",
@@ -163,6 +170,8 @@ class OverlayPanel:
         self.pointer.on_update(self._on_pointer)
         self.window_size.on_update(self._on_window_size)
         self.display_width = DISPLAY_WIDTH  # frames are sent at most this wide
+        self.window_width: int | None = None  # the browser window's width, as last reported
+        self.picking = False  # picking pairs: a narrower overlay, a wider 3D view
         self._fitted: dict[tuple, int | None] = {}  # the width the last frame of a kind fitted the budget at
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
@@ -202,8 +211,8 @@ class OverlayPanel:
     def render(self, snap: Snapshot, rest: bool = True) -> None:
         """Draw the overlay and send it within ``FRAME_BYTES``: at rest (``rest``) at the panel's
         width and the best quality that fits; while controls move, a quicker preview at most
-        ``DISPLAY_WIDTH`` wide. A zoomed view is a window of the map at map resolution, which
-        the browser magnifies without smoothing."""
+        ``DISPLAY_WIDTH`` wide. A zoomed view is a window of the map magnified without
+        smoothing; the points are drawn into the frame, at their screen size."""
         style = self.style()
         index, extrinsic = snap.selected, snap.shown_extrinsic
         disp = self.app.displays[index]
@@ -253,8 +262,17 @@ class OverlayPanel:
         parts = str(self.window_size.value).lower().split("x")
         if event.client is None or len(parts) != 2 or not parts[0].strip().isdigit():
             return
-        panel, frame = panel_layout(int(parts[0]))
-        if frame != self.display_width:
+        self.window_width = int(parts[0])
+        self._layout()
+
+    def set_picking(self, on: bool) -> None:
+        """Narrow the overlay while pairs are picked (the 3D view widens), and back."""
+        self.picking = bool(on)
+        self._layout(force=True)
+
+    def _layout(self, force: bool = False) -> None:
+        panel, frame = panel_layout(self.window_width or PANEL_WIDTH + CONTROLS_PX + MIN_3D_PX, self.picking)
+        if frame != self.display_width or force:
             self.panel.set_width(panel)
             self.display_width = frame
             self.app.display_changed()
