@@ -91,16 +91,31 @@ def test_centred_range_narrows_with_the_step():
     assert nudged(-1.726, 0.1) == pytest.approx(-1.626, abs=1e-15)
 
 
+def test_seed_values_are_checked_like_the_optimiser_settings():
+    from l2e_studio.app.checks import check_seed_value
+
+    assert check_seed_value("-0.1234", "x", False).value == -0.1234
+    assert check_seed_value("100", "z", False).value == 100.0 and check_seed_value("-180", "yaw", True).value == -180.0
+    for text, rotation, words in (("1e9", False, "x: 1e9 m is outside [-100, 100] m"),
+                                  ("1e300", True, "outside [-180, 180] °"), ("abc", False, "is not a number"),
+                                  ("inf", True, "is not a number")):
+        c = check_seed_value(text, "x" if not rotation else "roll", rotation)
+        assert c.value is None and words in c.problem, c.problem
+
+
 def test_settings_checks_refuse_instead_of_clamping():
     from l2e_studio.app.checks import check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 
     assert check_translation_bound("0.2").value == 0.2
-    for bad, words in (("-0.1", "outside"), ("0", "Rotation only"), ("3", "outside"), ("nan", "not a number")):
+    # the app takes what the CLI takes (calibrate --bound-m [0, 5], --bound-deg (0, 90], --sigma [0, 200])
+    assert check_translation_bound("0").value == 0.0 and check_translation_bound("5").value == 5.0
+    for bad, words in (("-0.1", "outside"), ("5.5", "Rotation only"), ("nan", "not a number")):
         c = check_translation_bound(bad)
         assert c.value is None and words in c.problem
     assert check_rotation_bound("500").value is None and "500" in check_rotation_bound("500").problem
-    assert check_rotation_bound("45").value == 45.0
-    assert check_sigma("0").value is None and check_sigma("NaN").value is None and check_sigma("2.5").value == 2.5
+    assert check_rotation_bound("90").value == 90.0 and check_rotation_bound("0").value is None
+    assert check_sigma("200").value == 200.0 and check_sigma("201").value is None
+    assert check_sigma("-1").value is None and check_sigma("0").value == 0.0 and check_sigma("NaN").value is None and check_sigma("2.5").value == 2.5
     assert "no scene is included" in start_blocker(0, [], False)
     assert start_blocker(3, ["x"], False) and start_blocker(3, [], True) and start_blocker(3, [], False) == ""
 

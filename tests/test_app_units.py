@@ -26,6 +26,7 @@ from l2e_studio.app.overlay import (
     point_colors,
     project_scene,
     render_overlay,
+    render_view,
 )
 from l2e_studio.app.pose import extrinsic_from_sliders, sliders_from_extrinsic
 from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES
@@ -291,3 +292,85 @@ def test_latest_worker_coalesces_bursts_and_runs_after_the_last_poke():
         assert worker.runs == len(seen)
     finally:
         worker.stop()
+
+
+# --- points at their screen size (render_view) -----------------------------------------------------
+
+def _one_point_view(window=None, width=None, screen_width=None, outline=0, size=3):
+    """One point at map pixel (32, 24) of a 64x48 grey map, drawn through render_view."""
+    ext = lidar_to_optical((0.0, 0.0, 0.0))
+    # a point on the optical axis 10 m ahead projects onto the principal point (31.5, 23.5)
+    pts = np.array([[10.0, 0.0, 0.0]], np.float32)
+    base = np.full((48, 64, 3), 128, np.uint8)
+    style = OverlayStyle(point_size=size, opacity=1.0, outline=outline)
+    colors = intensity_colors(np.array([255.0], np.float32))
+    return render_view(base, pts, ext, CAMERA, style, colors, window, width, screen_width, pixelated=window is not None)
+
+
+def _lit(img, colour):
+    return np.argwhere(np.all(img == colour, axis=2))
+
+
+def test_points_keep_their_screen_size_at_any_zoom_and_map_size():
+    colour = intensity_colors(np.array([255.0], np.float32))[0]
+    # the whole 64-px map shown 640 px wide, and a 4x window of it shown at the same width
+    fit = _one_point_view(width=640, screen_width=640)
+    zoomed = _one_point_view(window=(16, 12, 32, 24), width=640, screen_width=640)
+    for img in (fit, zoomed):
+        lit = _lit(img, colour)
+        assert len(lit) == len(disc_offsets(3)[0])  # 3 px across on screen either way
+    # centred where the map pixel lands: (31.5 + 0.5) * 10 - 0.5 in the fit frame
+    assert _lit(fit, colour).mean(axis=0) == pytest.approx([239.5, 319.5], abs=1.0)
+    assert _lit(zoomed, colour).mean(axis=0) == pytest.approx([(23.5 + 0.5 - 12) * 20 - 0.5, (31.5 + 0.5 - 16) * 20 - 0.5],
+                                                             abs=1.0)
+    # the map's pixels are blocks in the zoomed frame (nearest neighbour), not smoothed
+    assert zoomed.shape == (480, 640, 3)
+    # drawn at map resolution for a file, as if shown 16 px wide: discs scaled up 4x
+    big = _one_point_view(screen_width=16)
+    assert len(_lit(big, colour)) == len(disc_offsets(12)[0])
+
+
+def test_outline_darkens_a_ring_around_each_disc():
+    colour = intensity_colors(np.array([255.0], np.float32))[0]
+    img = _one_point_view(width=640, screen_width=640, outline=1)
+    disc = _lit(img, colour)
+    dark = np.argwhere(np.all(img == 32, axis=2))  # 128 >> 2
+    assert len(disc) == len(disc_offsets(3)[0]) and len(dark) > 0
+    assert np.abs(dark - disc.mean(axis=0)).max() <= 3  # a thin ring, next to the disc
+    assert (img == 128).all(axis=2).sum() == 640 * 480 - len(disc) - len(dark)  # nothing else changes
+
+
+def test_point_colours_skip_the_dark_ends_of_turbo_and_depth_is_the_default_on_photos():
+    from l2e_studio.app.overlay import default_color_by
+    from l2e_studio.drawing import point_table
+
+    lum = point_table().astype(float) @ [0.299, 0.587, 0.114]
+    assert lum.min() > 60  # turbo's own ends are ~30-45: dark purple / dark red on dark asphalt
+    assert default_color_by("image") == "depth" and default_color_by("events") == "intensity"
+
+
+# --- pairs for PnP ---------------------------------------------------------------------------------
+
+def test_pair_spread_flags_far_only_pairs_and_passes_near_and_far_ones():
+    from l2e_studio.app.pairs import Pair, pair_spread, solve_pnp, translation_warning
+
+    cam = CameraModel(np.array([[700.0, 0, 640], [0, 700.0, 360], [0, 0, 1]]), 1280, 720)
+    ext = lidar_to_optical((0.1, -0.2, 0.05))
+    rng = np.random.default_rng(0)
+
+    def pairs_between(near, far, n=8):
+        pts = np.column_stack([rng.uniform(near, far, n), rng.uniform(-0.5, 0.5, n) * near,
+                               rng.uniform(-0.3, 0.3, n) * near])
+        uv, _ = project_points(ext.transform(pts), cam)
+        return [Pair(tuple(p), tuple(q)) for p, q in zip(pts, uv)]
+
+    good = pairs_between(3.0, 15.0)
+    spread = pair_spread(solve_pnp(good, cam), good, cam)
+    assert spread.translation_std.max() < 0.02 and translation_warning(spread, 0.2 / 3) == ""
+    far = pairs_between(38.0, 45.0)
+    spread = pair_spread(solve_pnp(far, cam), far, cam)
+    assert spread.translation_std.max() > 0.2  # ±20 cm and more: the seed's translation is a guess
+    text = translation_warning(spread, 0.2 / 3)
+    assert "close to the camera" in text and "other distances" in text and "40." in text
+    # two pairs cannot pin six parameters
+    assert not np.isfinite(pair_spread(ext, good[:2], cam).translation_std).any()

@@ -9,14 +9,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..io.events import Accumulation
+from ..limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M  # the CLI's bounds
 from .exact import parse_number
 
-MAX_TRANSLATION_BOUND_M = 2.0
-MAX_ROTATION_BOUND_DEG = 45.0
-MAX_SIGMA_PX = 50.0
 MAX_WINDOW_S = 3600.0  # an hour of a static scene is already far more than a map needs
 MAX_HOT_PIXEL_SIGMA = 1000.0  # as the accumulate command's --hot-pixels
 OFF_WORDS = ("", "off", "none", "no")
+#: A seed's translation per axis, metres: the lidar must see what the camera sees, so the two sit
+#: well within a lidar's range (~100 m for the usual spinning units); further, no point projects.
+MAX_SEED_TRANSLATION_M = 100.0
+#: A seed's roll / pitch / yaw correction, degrees: beyond half a turn an angle is the same
+#: rotation as a smaller one the other way.
+MAX_SEED_ANGLE_DEG = 180.0
 
 
 @dataclass(frozen=True)
@@ -45,19 +49,28 @@ def _in_range(text: str, name: str, unit: str, low: float, high: float, low_open
 
 
 def check_translation_bound(text: str) -> Checked:
-    """Metres either side of the start, per axis: (0, 2]."""
-    return _in_range(text, "± translation", "m", 0.0, MAX_TRANSLATION_BOUND_M, True,
-                     "tick Rotation only to keep the translation fixed")
+    """Metres either side of the start, per axis: [0, 5], as ``calibrate --bound-m`` (0: fixed)."""
+    return _in_range(text, "± translation", "m", 0.0, MAX_TRANSLATION_BOUND_M, False,
+                     "0 or Rotation only keeps the translation fixed")
 
 
 def check_rotation_bound(text: str) -> Checked:
-    """Degrees either side of the start, per axis: (0, 45]."""
+    """Degrees either side of the start, per axis: (0, 90], as ``calibrate --bound-deg``."""
     return _in_range(text, "± rotation", "°", 0.0, MAX_ROTATION_BOUND_DEG, True)
 
 
 def check_sigma(text: str) -> Checked:
-    """Gaussian smoothing of the maps in pixels: (0, 50]."""
-    return _in_range(text, "Smoothing σ", "px", 0.0, MAX_SIGMA_PX, True)
+    """Gaussian smoothing of the maps in pixels: [0, 200], as ``calibrate --sigma`` (0: none)."""
+    return _in_range(text, "Smoothing σ", "px", 0.0, MAX_SIGMA_PX, False)
+
+
+def check_seed_value(text: str, axis: str, rotation: bool) -> Checked:
+    """A typed seed value: translation within ±100 m, roll / pitch / yaw within ±180°."""
+    if rotation:
+        return _in_range(text, axis, "°", -MAX_SEED_ANGLE_DEG, MAX_SEED_ANGLE_DEG, False,
+                         "a larger angle is the same rotation as a smaller one the other way")
+    return _in_range(text, axis, "m", -MAX_SEED_TRANSLATION_M, MAX_SEED_TRANSLATION_M, False,
+                     "lidar and camera must see the same scene")
 
 
 def start_blocker(n_included: int, problems: list[str], running: bool, rebuilding: bool = False) -> str:

@@ -3,9 +3,9 @@ with units, and an edge view (pure numpy / OpenCV, no viser).
 
 Zoom levels: ``fit`` shows the whole map; ``1:1`` a window of the display's width in map
 pixels, one map pixel per screen pixel; ``2x`` / ``4x`` half / a quarter of that window, each
-map pixel drawn as a 2x2 / 4x4 block. The window is sent at map resolution and the browser
-magnifies it without smoothing (``image-rendering: pixelated``), so no smoothing hides a
-misalignment and a 4x view costs a sixteenth of the bytes of a magnified frame.
+map pixel drawn as a 2x2 / 4x4 block. The window is magnified without smoothing (nearest
+neighbour) to the frame's width and the points are drawn into the magnified frame, so no
+smoothing hides a misalignment and a point keeps its screen size at any zoom.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .overlay import color_table
+from ..drawing import point_table
 
 ZOOMS = {"fit": 0, "1:1": 1, "2x": 2, "4x": 4}
 
@@ -62,7 +62,7 @@ def depth_range(depth: np.ndarray) -> tuple[float, float]:
 
 
 def _gradient(indices: np.ndarray) -> str:
-    lut = color_table("turbo")
+    lut = point_table()
     stops = ", ".join(f"rgb({r},{g},{b}) {100 * k / (len(indices) - 1):.0f}%"
                       for k, (r, g, b) in enumerate(lut[indices]))
     return f"linear-gradient(to right, {stops})"

@@ -2,19 +2,25 @@
 
 Everything here is plain numpy (plus OpenCV for the colour table, dilation, text and JPEG
 encoding) and has no viser import, so it can be benchmarked and unit-tested on its own. Points
-are drawn as small discs by one vectorised scatter and one dilation -- never one drawing call
-per point -- so a full-size overlay (1280x720, 75k points) renders in a few milliseconds.
+are drawn as small discs by :func:`l2e_studio.drawing.draw_points` (one vectorised scatter and
+one dilation), so a full-size overlay (1280x720, 75k points) renders in a few milliseconds.
+
+:func:`render_view` draws the overlay at the size it is shown: the map (or a zoomed window of
+it) is scaled to the frame first and the points are drawn into the frame at their sub-pixel
+positions, so a point is ``point_size`` screen pixels across whatever the map's size and the
+zoom (drawn on the map, a 1920-px photo shown 730 px wide would shrink its discs below a pixel,
+and a 4x zoom would blow them up until they hide what they are aligned with).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import cv2
 import numpy as np
 
 from ..camera import CameraModel
+from ..drawing import color_table, depth_colors, disc_offsets, disc_size, draw_points, point_table  # noqa: F401
 from ..geometry import Extrinsic, in_image, project_points
 from ..objective import CLIP
 
@@ -27,9 +33,10 @@ class OverlayStyle:
     """How the overlay looks: what colours the points, their size and opacity, map contrast."""
 
     color_by: str = "intensity"
-    point_size: int = 2
+    point_size: int = 2  # px across on screen (see render_view), or on the image drawn on (render_overlay)
     opacity: float = 0.85
     contrast: float = 1.0
+    outline: int = 1  # px of dark ring around each disc: points read on bright images too
 
     def __post_init__(self) -> None:
         if self.color_by not in COLOR_MODES:
@@ -40,6 +47,15 @@ class OverlayStyle:
             raise ValueError(f"opacity must be in [0, 1], got {self.opacity}")
         if not float(self.contrast) > 0.0:
             raise ValueError(f"contrast must be positive, got {self.contrast}")
+        if not 0 <= int(self.outline) <= 4:
+            raise ValueError(f"outline must be 0..4 px, got {self.outline}")
+
+
+def default_color_by(map_kind: str) -> str:
+    """Depth for camera images (a photo's own colours drown intensity shades; depth edges show
+    where the points should sit), intensity for event maps (their black background shows any
+    colour, and intensity edges are what the events saw)."""
+    return "intensity" if map_kind == "events" else "depth"
 
 
 @dataclass(frozen=True)
@@ -49,14 +65,6 @@ class Projection:
     uv: np.ndarray  # (M, 2) float pixel coordinates
     depth: np.ndarray  # (M,) camera-frame z, metres
     index: np.ndarray  # (M,) indices into the scene's point array
-
-
-@lru_cache(maxsize=4)
-def color_table(name: str = "turbo") -> np.ndarray:
-    """A (256, 3) uint8 RGB lookup table (OpenCV's colour maps, converted from BGR)."""
-    cmap = {"turbo": cv2.COLORMAP_TURBO, "viridis": cv2.COLORMAP_VIRIDIS}[name]
-    lut = cv2.applyColorMap(np.arange(256, dtype=np.uint8)[:, None], cmap)[:, 0, ::-1]
-    return np.ascontiguousarray(lut)
 
 
 def normalise_map(event_map: np.ndarray, map_kind: str = "events") -> np.ndarray:
@@ -106,86 +114,13 @@ def point_colors(
         if intensity_rgb is None:
             raise ValueError("intensity colours are needed for color_by='intensity'")
         return intensity_rgb[projection.index]
-    d = projection.depth
-    if d.size == 0:
-        return np.zeros((0, 3), np.uint8)
-    lo, hi = np.percentile(d, [2.0, 98.0])
-    t = np.clip((d - lo) / max(hi - lo, 1e-6), 0.0, 1.0)
-    return color_table("turbo")[(255 - np.rint(t * 255)).astype(np.uint8)]
+    return depth_colors(projection.depth)
 
 
 def intensity_colors(intensity: np.ndarray) -> np.ndarray:
     """(N, 3) uint8 colours for lidar intensities 0..255 (computed once per scene)."""
-    lut = color_table("turbo")
     idx = np.clip(np.nan_to_num(np.asarray(intensity, np.float32)), 0, 255).astype(np.uint8)
-    return lut[idx]
-
-
-@lru_cache(maxsize=32)
-def disc_offsets(size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel offsets (dy, dx) of a filled disc ``size`` pixels across."""
-    size = int(size)
-    r = (size - 1) / 2.0
-    lo = -int(np.floor(r))
-    hi = int(np.ceil(r))
-    ys, xs = np.mgrid[lo : hi + 1, lo : hi + 1]
-    cy = cx = (lo + hi) / 2.0
-    keep = (ys - cy) ** 2 + (xs - cx) ** 2 <= (r + 0.5) ** 2 if size > 2 else np.ones_like(ys, bool)
-    return ys[keep].astype(np.int32), xs[keep].astype(np.int32)
-
-
-@lru_cache(maxsize=32)
-def _disc_kernel(size: int) -> tuple[np.ndarray, tuple[int, int]]:
-    """The disc as a dilation kernel and its anchor (x, y)."""
-    dys, dxs = disc_offsets(size)
-    lo = int(min(dys.min(), dxs.min()))
-    k = int(max(dys.max(), dxs.max())) - lo + 1
-    kernel = np.zeros((k, k), np.uint8)
-    kernel[dys - lo, dxs - lo] = 1
-    return kernel, (-lo, -lo)
-
-
-def draw_points(
-    base: np.ndarray,
-    uv: np.ndarray,
-    colors: np.ndarray,
-    point_size: int = 2,
-    opacity: float = 1.0,
-    depth: np.ndarray | None = None,
-) -> np.ndarray:
-    """Draw discs of ``colors`` at pixel positions ``uv`` on a copy of ``base`` (H, W, 3 uint8).
-
-    Each point's rank is scattered into a one-channel image (near points ranked above far ones
-    when ``depth`` is given), the image is grown into discs by one grey dilation (a max filter:
-    where discs overlap, the nearer point wins), the ranks are turned into colours through a
-    packed RGBA palette, and the disc pixels are copied (or blended, with ``opacity``) onto
-    the map. Whole-image operations only: no per-point or per-offset loop.
-    """
-    h, w = base.shape[:2]
-    out = base.copy()
-    u = np.rint(uv[:, 0]).astype(np.int32)
-    v = np.rint(uv[:, 1]).astype(np.int32)
-    ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    u, v, colors = u[ok], v[ok], colors[ok]
-    if u.size == 0:
-        return out
-    if depth is not None and u.size > 1:
-        order = np.argsort(-np.asarray(depth)[ok])  # far first, so near points rank higher
-        u, v, colors = u[order], v[order], colors[order]
-    rank = np.zeros((h, w), np.float32)  # 0 = no point; exact for ranks below 2**24
-    rank[v, u] = np.arange(1, u.size + 1, dtype=np.float32)  # repeated pixels: the last (nearest) wins
-    if point_size > 1:
-        kernel, anchor = _disc_kernel(int(point_size))
-        rank = cv2.dilate(rank, kernel, anchor=anchor)
-    palette = np.zeros((u.size + 1, 4), np.uint8)  # RGBA rows viewed as one uint32 each
-    palette[1:, :3] = colors
-    layer = palette.view(np.uint32).ravel()[rank.astype(np.int32)]
-    layer = np.ascontiguousarray(layer.view(np.uint8).reshape(h, w, 4)[:, :, :3])
-    if opacity < 1.0:
-        layer = cv2.addWeighted(base, 1.0 - float(opacity), layer, float(opacity), 0.0)
-    mask = (rank > 0).view(np.uint8)
-    cv2.copyTo(layer, mask, out)
-    return out
+    return point_table()[idx]
 
 
 def render_overlay(
@@ -199,7 +134,50 @@ def render_overlay(
     """The full overlay: project ``points`` at ``extrinsic`` and draw them on ``base_rgb``."""
     proj = project_scene(points, extrinsic, camera)
     colors = point_colors(proj, intensity_rgb, style.color_by)
-    return draw_points(base_rgb, proj.uv, colors, style.point_size, style.opacity, proj.depth)
+    return draw_points(base_rgb, proj.uv, colors, style.point_size, style.opacity, proj.depth, style.outline)
+
+
+def render_view(
+    base_rgb: np.ndarray,
+    points: np.ndarray,
+    extrinsic: Extrinsic,
+    camera: CameraModel,
+    style: OverlayStyle,
+    intensity_rgb: np.ndarray | None = None,
+    window: tuple[int, int, int, int] | None = None,
+    width: int | None = None,
+    screen_width: float | None = None,
+    pixelated: bool = False,
+    projection: Projection | None = None,
+) -> np.ndarray:
+    """The overlay of the map's ``window`` (x0, y0, w, h in map pixels; None: all of it) drawn
+    ``width`` pixels wide (None: the window's own width).
+
+    The window is scaled first (area averaging when shrunk; nearest neighbour when
+    ``pixelated``, so a zoomed map shows its pixels), then the points are drawn into the frame at
+    their sub-pixel positions, ``style.point_size`` pixels across when the frame is shown
+    ``screen_width`` pixels wide (None: as drawn) and ringed by ``style.outline`` pixels.
+    ``projection``: the points already projected at ``extrinsic`` (saves doing it twice).
+    """
+    h, w = base_rgb.shape[:2]
+    x0, y0, ww, wh = window if window is not None else (0, 0, w, h)
+    out_w = int(width) if width else ww
+    out_h = max(1, int(round(wh * out_w / ww)))
+    crop = base_rgb[y0 : y0 + wh, x0 : x0 + ww]
+    if (out_w, out_h) != (ww, wh):
+        interp = cv2.INTER_NEAREST if pixelated else cv2.INTER_AREA if out_w < ww else cv2.INTER_LINEAR
+        crop = cv2.resize(crop, (out_w, out_h), interpolation=interp)
+    else:
+        crop = np.ascontiguousarray(crop)
+    proj = projection if projection is not None else project_scene(points, extrinsic, camera)
+    colors = point_colors(proj, intensity_rgb, style.color_by)
+    sx, sy = out_w / ww, out_h / wh
+    # a map pixel's centre (x + 0.5) lands at (x + 0.5 - x0) * scale in the frame
+    uv = np.column_stack(((proj.uv[:, 0] + 0.5 - x0) * sx - 0.5, (proj.uv[:, 1] + 0.5 - y0) * sy - 0.5))
+    per_screen = out_w / float(screen_width) if screen_width else 1.0
+    size = disc_size(style.point_size, per_screen)
+    outline = disc_size(style.outline, per_screen) if style.outline else 0
+    return draw_points(crop, uv, colors, size, style.opacity, proj.depth, outline)
 
 
 def label(image: np.ndarray, text: str) -> np.ndarray:

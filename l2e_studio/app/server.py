@@ -85,17 +85,17 @@ class App:
         server.gui.main_panel.dock_right()
         self.overlay = OverlayPanel(self)
         tabs = gui.add_tab_group()
-        with tabs.add_tab("Scenes", viser.Icon.LIST):
+        with tabs.add_tab("Scenes"):
             self.scenes = ScenesPanel(self)
             self.event_maps = EventMapsPanel(self)
-        with tabs.add_tab("Seed", viser.Icon.ADJUSTMENTS):
+        with tabs.add_tab("Seed"):
             self.extrinsic = ExtrinsicPanel(self)
             self.pairs = PairsPanel(self)
-        with tabs.add_tab("Optimise", viser.Icon.PLAYER_PLAY):
+        with tabs.add_tab("Optimise"):
             self.optimise = OptimisePanel(self)
-        with tabs.add_tab("Result", viser.Icon.CHECKLIST):
+        with tabs.add_tab("Result"):
             self.results = ResultPanel(self)
-        with tabs.add_tab("QA", viser.Icon.REPORT_ANALYTICS):
+        with tabs.add_tab("QA"):
             self.qa = QAPanel(self)
         self.compare = ComparePanel(self, self.overlay)
         self.view3d = View3D(self)
@@ -189,6 +189,12 @@ class App:
             self.pairs.pixel_picked(x, y)
             return True
         return False
+
+    def picking_changed(self, on: bool) -> None:
+        """Picking pairs for PnP started or stopped: the 3D view looks through the camera and widens."""
+        with self._ui_lock:
+            self.overlay.set_picking(on)
+            self.view3d.set_picking(on)
 
     def current_pairs(self) -> list[Pair]:
         """The clicked lidar/pixel pairs (saved with the seed)."""

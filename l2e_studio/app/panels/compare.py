@@ -31,7 +31,8 @@ class ComparePanel:
             gui.add_html(pointer_marker("Compare pointer", drag=True))
             self.image = gui.add_image(np.zeros((cam.height // 2, cam.width, 3), np.uint8), format="jpeg",
                                        jpeg_quality=85, visible=False)
-            self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="side by side")
+            self.mode = gui.add_dropdown("Compare", COMPARE_MODES, initial_value="swipe",
+                                        hint="swipe: drag on the image, seed left of the line and result right of it")
             self.amount = gui.add_slider("Swipe / blend", 0.0, 1.0, 0.01, 0.5,
                                          hint="Swipe: where the seed ends and the result begins; blend: share of the result")
             self.pointer = gui.add_text("Compare pointer", "", hint="(set by clicks and drags on the image)")
@@ -49,19 +50,24 @@ class ComparePanel:
             return
         self.amount.value = float(np.clip(round(fx, 3), 0.0, 1.0))  # runs the amount's callback
 
-    def compose(self, snap: Snapshot, mode: str | None = None, scale: float = 0.5) -> np.ndarray | None:
-        """The before/after image of the selected scene, or None without a result."""
+    def compose(self, snap: Snapshot, mode: str | None = None, scale: float = 0.5,
+                width: int | None = None) -> np.ndarray | None:
+        """The before/after image of the selected scene, or None without a result: ``width``
+        pixels wide as the panel shows it (points at their screen size), else from overlays at
+        map resolution, side by side at ``scale``."""
         result = snap.result
         if result is None:
             return None
         style = self.overlay.style()
-        before = self.overlay.draw(snap.selected, result.seed, style)
-        after = self.overlay.draw(snap.selected, snap.accepted, style)  # "result": what Accept sets
-        return compose_before_after(before, after, mode or self.mode.value, float(self.amount.value), scale)
+        mode = mode or self.mode.value
+        each = None if width is None else max(1, width // 2 if mode == "side by side" else width)
+        before = self.overlay.draw(snap.selected, result.seed, style, each, screen_width=each)
+        after = self.overlay.draw(snap.selected, snap.accepted, style, each, screen_width=each)  # "result": what Accept sets
+        return compose_before_after(before, after, mode, float(self.amount.value), 1.0 if each else scale)
 
     def render(self) -> None:
         snap = self.app.state.snapshot()
-        img = self.compose(snap)
+        img = self.compose(snap, width=self.overlay.display_width)
         if img is None:
             self.caption.content = NO_RESULT
             self.image.visible = False

@@ -10,6 +10,7 @@ from ..context import Workbench
 from ...errors import InputError
 from ...geometry import Extrinsic
 from ..browser_js import KEY_HANDLING_HTML, hide_slider_boxes
+from ..checks import check_seed_value
 from ..exact import centred_range, format_value, is_partial, nudged, parse_number
 from ..files import save_seed, seed_document, seed_from_upload
 from ..pose import SLIDER_NAMES, describe, extrinsic_from_sliders, sliders_from_extrinsic
@@ -51,6 +52,7 @@ class ExtrinsicPanel:
         self.sliders: list[viser.GuiSliderHandle] = []
         self.fields: list[viser.GuiTextHandle] = []
         self.nudges: list[viser.GuiButtonGroupHandle] = []
+        self.problems: list[viser.GuiMarkdownHandle] = []  # a refused typed value, said beside its field
         for i, name in enumerate(SLIDER_NAMES):
             unit = "m" if i < 3 else "°"
             what = f"T_cam_lidar translation {name}, metres" if i < 3 else f"{name} correction to the file seed, degrees"
@@ -58,6 +60,7 @@ class ExtrinsicPanel:
                                float(self.values[i]), hint=what + " (drag: ±100 steps)")
             s.precision = SLIDER_PRECISION
             f = gui.add_text(f"{name} =", format_value(self.values[i]), hint=what + ": type or paste an exact value")
+            self.problems.append(gui.add_markdown("", visible=False))
             b = gui.add_button_group(f"{name} ±", ("−", "+"), hint=f"Nudge {name} by one step")
             s.on_update(lambda event, i=i: self._on_slider(event, i))
             f.on_update(lambda event, i=i: self._on_typed(event, i))
@@ -66,7 +69,6 @@ class ExtrinsicPanel:
             self.fields.append(f)
             self.nudges.append(b)
         gui.add_html(hide_slider_boxes([s._impl.uuid for s in self.sliders]) + KEY_HANDLING_HTML)
-        self.note = gui.add_markdown("", visible=False)
         self.pose_text = gui.add_markdown("")
         self.reset = gui.add_button("Reset to file seed", icon=viser.Icon.ARROW_BACK_UP,
                                     hint=f"Back to the seed read from {app.scene_set.seed_source or 'the scene folder'}")
@@ -99,25 +101,31 @@ class ExtrinsicPanel:
         self._set_value(i, float(self.sliders[i].value), "sliders")
 
     def _on_typed(self, event, i: int) -> None:
+        """A typed value is checked like the Optimise fields: refused (the state keeps its value,
+        said beside the field) unless it is a number within the axis' range."""
         if event.client is None:
             return
         text = self.fields[i].value
-        value = parse_number(text)
-        if value is None:
-            self._show_note("" if is_partial(text) else f"{SLIDER_NAMES[i]}: “{text}” is not a number; "
-                            "the value stays " + format_value(self.values[i]))
+        checked = check_seed_value(text, SLIDER_NAMES[i], rotation=i >= 3)
+        if checked.value is None:
+            partial = is_partial(text)
+            self._show_problem(i, "" if partial else f"{checked.problem}; the value stays {format_value(self.values[i])}")
             return
-        self._show_note("")
-        if value != self.values[i]:
-            self._set_value(i, value, "typed")
+        self._show_problem(i, "")
+        if checked.value != self.values[i]:
+            self._set_value(i, checked.value, "typed")
 
     def _on_nudge(self, event, i: int) -> None:
         sign = -1.0 if self.nudges[i].value.startswith("−") else 1.0
         self._set_value(i, nudged(self.values[i], sign * self.step_of(i)), "nudge")
 
-    def _show_note(self, text: str) -> None:
-        self.note.content = f"⚠ {text}" if text else ""
-        self.note.visible = bool(text)
+    def _show_problem(self, i: int, text: str) -> None:
+        note = self.problems[i]
+        content = f"⚠ {text}" if text else ""
+        if note.content != content:
+            note.content = content
+        if note.visible != bool(text):
+            note.visible = bool(text)
 
     def _apply_step(self) -> None:
         for i, s in enumerate(self.sliders):
@@ -159,7 +167,8 @@ class ExtrinsicPanel:
         """Show ``extrinsic``: exact ``values`` when the change came from this panel, else derived.
 
         The field being typed in is left alone (rewriting it would fight the keyboard), and a
-        slider being dragged keeps its range; every other change re-centres the sliders.
+        slider being dragged keeps its range; every other change re-centres the sliders and
+        rewrites every field, a refused one included (its warning goes with its text).
         """
         if values is None:
             values = sliders_from_extrinsic(extrinsic, self.reference, near=self.values)
@@ -167,6 +176,7 @@ class ExtrinsicPanel:
         for i, f in enumerate(self.fields):
             if source == "typed" and parse_number(f.value) == self.values[i]:
                 continue
+            self._show_problem(i, "")
             f.value = format_value(self.values[i])
         if source == "sliders":
             return

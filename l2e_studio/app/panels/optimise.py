@@ -21,6 +21,7 @@ import viser.uplot
 
 from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
+from ...limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
@@ -46,13 +47,16 @@ class OptimisePanel:
                                        hint="SLSQP is fastest; L-BFGS-B and Powell are robust")
         # Text fields, checked on the server: a number box would clamp or drop what is typed.
         self.t_bound = gui.add_text("± translation (m)", format_value(defaults.translation_bound),
-                                    hint="Search bound per axis around the start, metres: (0, 2]")
+                                    hint=f"Search bound per axis around the start, metres: [0, {MAX_TRANSLATION_BOUND_M:g}] "
+                                         "(as calibrate --bound-m; 0 keeps it fixed)")
         self.t_problem = gui.add_markdown("", visible=False)
         self.r_bound = gui.add_text("± rotation (°)", format_value(defaults.rotation_bound_deg),
-                                    hint="Search bound per axis around the start, degrees: (0, 45]")
+                                    hint=f"Search bound per axis around the start, degrees: (0, {MAX_ROTATION_BOUND_DEG:g}] "
+                                         "(as calibrate --bound-deg)")
         self.r_problem = gui.add_markdown("", visible=False)
         self.sigma_in = gui.add_text("Smoothing σ (px)", format_value(defaults.sigma),
-                                     hint="Gaussian smoothing of the event maps in pixels, (0, 50]; the paper uses 5")
+                                     hint=f"Gaussian smoothing of the event maps in pixels, [0, {MAX_SIGMA_PX:g}] "
+                                          "(as calibrate --sigma); the paper uses 5")
         self.s_problem = gui.add_markdown("", visible=False)
         self._sigma = float(defaults.sigma)
         self.rotation_only = gui.add_checkbox("Rotation only", defaults.rotation_only,

@@ -11,7 +11,7 @@ from ..browser_js import hide_inputs, pointer_marker
 from ..display import MAP_MODES
 from ..exact import parse_number
 from ..inspect import ZOOMS, Window, cropped, depth_range, edge_view, legend_html, zoom_window
-from ..overlay import COLOR_MODES, OverlayStyle, encode_jpeg, project_scene, render_overlay
+from ..overlay import COLOR_MODES, OverlayStyle, default_color_by, encode_jpeg, project_scene, render_view
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import score_num
@@ -20,24 +20,32 @@ DISPLAY_WIDTH = 640  # px: previews are at most this wide; frames at rest take t
 FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
 REST_QUALITIES = (92, 85, 78, 70, 62, 55, 48, 40)  # the frame at rest: the best of these within FRAME_BYTES
 PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAME_BYTES
+POINT_SIZE_PX = 2  # screen px (plus the dark outline): a 64-beam scan on a 1920-px photo shown ~730 px wide reads at a glance
 PANEL_WIDTH = 760  # px at start; then from the window's width (see ``panel_layout``)
 CONTROLS_PX = 400  # about the width of the controls docked right (control_width="large")
 MIN_3D_PX = 220  # what the 3D view keeps between the overlay and the controls
 MIN_PANEL_PX = 640  # the overlay panel never narrower than this
 MAX_PANEL_SHARE = 0.6  # of the window's width
+PICKING_SHARE = 0.45  # of what the controls leave, while picking pairs: the 3D view gets the rest
+MIN_PICKING_PX = 360
 
 
-def panel_layout(window_width: int) -> tuple[int, int]:
+def panel_layout(window_width: int, picking: bool = False) -> tuple[int, int]:
     """(overlay panel width, frame width) in CSS px for a window ``window_width`` wide: the
-    overlay gets what the controls and a usable 3D view leave, up to 60 % of the window."""
+    overlay gets what the controls and a usable 3D view leave, up to 60 % of the window; while
+    picking pairs, a bit less than half of what the controls leave (the 3D view is where the
+    points are picked: at 1366 px it gets ~530 px instead of ~220)."""
     window_width = min(max(int(window_width), 320), 8192)
+    if picking:
+        panel = max(MIN_PICKING_PX, int(PICKING_SHARE * (window_width - CONTROLS_PX)))
+        return panel, panel - 24
     panel = int(min(window_width - CONTROLS_PX - MIN_3D_PX, MAX_PANEL_SHARE * window_width))
     panel = max(MIN_PANEL_PX, panel)
     return panel, max(480, panel - 24)
 
 
 VIEWS = ("overlay", "edges")
-#: A zoomed window is sent at map resolution and magnified by the browser without smoothing.
+#: A zoomed window is magnified without smoothing (also where the browser scales the frame).
 IMAGE_CSS = {
     "fit": "<style>img[src^='blob:'] { width: 100% !important; }</style>",
     "zoomed": "<style>img[src^='blob:'] { width: 100% !important; image-rendering: pixelated; }</style>",
@@ -109,6 +117,7 @@ class OverlayPanel:
         self.app = app
         gui = app.server.gui
         cam = app.camera
+        kind = app.scene_set.scenes[0].map_kind if app.scene_set.scenes else "events"
         self.panel = gui.add_panel()
         self.frames = 0
         self.rest_frame = True  # whether the last frame sent was the one at rest (not a preview)
@@ -136,9 +145,13 @@ class OverlayPanel:
             self.pointer = gui.add_text("Overlay pointer", "", hint="(set by clicks on the image)")
             self.window_size = gui.add_text("Window size", "", hint="(set by the page: its window's size)")
             with gui.add_folder("Display"):
-                self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value="intensity",
-                                                 hint="Colour the lidar points by their intensity or their depth")
-                self.point_size = gui.add_slider("Point size", 1, 8, 1, 2, hint="Disc diameter in pixels")
+                self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value=default_color_by(kind),
+                                                 hint="Colour the lidar points by their intensity or their depth "
+                                                      "(default: depth on camera images, intensity on event maps)")
+                self.point_size = gui.add_slider("Point size (px)", 1, 8, 1, POINT_SIZE_PX,
+                                                 hint="Disc diameter in screen pixels: the same at any zoom and map size")
+                self.outline = gui.add_checkbox("Dark outline", True,
+                                                hint="A dark ring around each point: readable on bright and dark images")
                 self.opacity = gui.add_slider("Opacity", 0.0, 1.0, 0.05, 0.8,
                                               hint="Lower it to see the event map through the points")
                 self.contrast = gui.add_slider("Contrast", 0.2, 6.0, 0.1, 1.0, hint="Brightens the event map")
@@ -148,8 +161,8 @@ class OverlayPanel:
                 )
             gui.add_html(hide_inputs([self.pointer, self.window_size]))
         self.compare_tab = self.panel.add_tab("Before / after")
-        for handle in (self.color_by, self.point_size, self.opacity, self.contrast, self.map_mode, self.zoom,
-                       self.view):
+        for handle in (self.color_by, self.point_size, self.outline, self.opacity, self.contrast, self.map_mode,
+                       self.zoom, self.view):
             handle.on_update(lambda _: app.display_changed())
         self.centre = (cam.width / 2.0, cam.height / 2.0)
         self.window: Window | None = None  # the part of the map the last frame showed
@@ -157,6 +170,8 @@ class OverlayPanel:
         self.pointer.on_update(self._on_pointer)
         self.window_size.on_update(self._on_window_size)
         self.display_width = DISPLAY_WIDTH  # frames are sent at most this wide
+        self.window_width: int | None = None  # the browser window's width, as last reported
+        self.picking = False  # picking pairs: a narrower overlay, a wider 3D view
         self._fitted: dict[tuple, int | None] = {}  # the width the last frame of a kind fitted the budget at
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
@@ -167,42 +182,58 @@ class OverlayPanel:
             point_size=int(self.point_size.value),
             opacity=float(self.opacity.value),
             contrast=float(self.contrast.value),
+            outline=1 if self.outline.value else 0,
         )
 
     def base_image(self, index: int, style: OverlayStyle) -> np.ndarray:
         sigma = self.app.readout.sigma
         return self.app.displays[index].base(style.contrast, self.map_mode.value, sigma)
 
-    def draw(self, index: int, extrinsic, style: OverlayStyle | None = None) -> np.ndarray:
-        """The overlay of scene ``index`` at ``extrinsic`` as an RGB array."""
+    def draw(self, index: int, extrinsic, style: OverlayStyle | None = None, width: int | None = None,
+             window: Window | None = None, projection=None, screen_width: float | None = None) -> np.ndarray:
+        """The overlay of scene ``index`` at ``extrinsic`` (of ``window`` of the map: None, all of
+        it) as an RGB array ``width`` pixels wide (None: at map resolution), its points
+        ``style.point_size`` pixels across on screen when the image is shown ``screen_width``
+        pixels wide (None: a frame as the panel shows it, ``display_width``; an image at map
+        resolution drawn as if the panel showed it, so a saved file looks like the screen)."""
         style = style or self.style()
         disp = self.app.displays[index]
         colors = disp.colors() if style.color_by == "intensity" else None
-        return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
+        box = None if window is None else (window.x0, window.y0, window.width, window.height)
+        map_w = window.width if window is not None else self.app.camera.width
+        out_w = width or map_w
+        # the frame is shown display_width px wide; at map resolution, as the panel would show the map
+        screen = screen_width or (self.display_width if width else self.display_width * map_w / self.app.camera.width)
+        return render_view(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style,
+                           colors, box, out_w, screen, pixelated=window is not None and out_w > map_w,
+                           projection=projection)
 
     def render(self, snap: Snapshot, rest: bool = True) -> None:
         """Draw the overlay and send it within ``FRAME_BYTES``: at rest (``rest``) at the panel's
         width and the best quality that fits; while controls move, a quicker preview at most
-        ``DISPLAY_WIDTH`` wide. A zoomed view is a window of the map at map resolution, which
-        the browser magnifies without smoothing."""
+        ``DISPLAY_WIDTH`` wide. A zoomed view is a window of the map magnified without
+        smoothing; the points are drawn into the frame, at their screen size."""
         style = self.style()
         index, extrinsic = snap.selected, snap.shown_extrinsic
         disp = self.app.displays[index]
         projection = None
         if self.view.value == "edges" or style.color_by == "depth":
             projection = project_scene(disp.scene.points, extrinsic, self.app.camera)
+        zoom = self.zoom.value
+        cam = self.app.camera
+        window = zoom_window((cam.height, cam.width), zoom, self.centre, self.display_width)
+        width = self.display_width if rest else min(self.display_width, DISPLAY_WIDTH)
         if self.view.value == "edges":
             assert projection is not None
             normalised = disp.normalised("smoothed", self.app.readout.sigma)  # edges of the map the MI sees
             image = edge_view(normalised, projection.uv, projection.depth)
+            if zoom != "fit":
+                image = cropped(image, window)
+            full = min(width, image.shape[1]) if zoom == "fit" else image.shape[1]  # before the byte budget
         else:
-            image = self.draw(index, extrinsic, style)
-        zoom = self.zoom.value
-        window = zoom_window(image.shape, zoom, self.centre, self.display_width)
-        width = self.display_width if rest else min(self.display_width, DISPLAY_WIDTH)
-        if zoom != "fit":
-            image = cropped(image, window)
-        full = min(width, image.shape[1]) if zoom == "fit" else image.shape[1]  # before the byte budget
+            # drawn at the frame's size: points keep their screen size at any zoom and map size
+            image = self.draw(index, extrinsic, style, width, None if zoom == "fit" else window, projection)
+            full = image.shape[1]
         css = IMAGE_CSS["fit" if zoom == "fit" else "zoomed"]
         if self.image_css.content != css:
             self.image_css.content = css
@@ -231,8 +262,17 @@ class OverlayPanel:
         parts = str(self.window_size.value).lower().split("x")
         if event.client is None or len(parts) != 2 or not parts[0].strip().isdigit():
             return
-        panel, frame = panel_layout(int(parts[0]))
-        if frame != self.display_width:
+        self.window_width = int(parts[0])
+        self._layout()
+
+    def set_picking(self, on: bool) -> None:
+        """Narrow the overlay while pairs are picked (the 3D view widens), and back."""
+        self.picking = bool(on)
+        self._layout(force=True)
+
+    def _layout(self, force: bool = False) -> None:
+        panel, frame = panel_layout(self.window_width or PANEL_WIDTH + CONTROLS_PX + MIN_3D_PX, self.picking)
+        if frame != self.display_width or force:
             self.panel.set_width(panel)
             self.display_width = frame
             self.app.display_changed()

@@ -1,6 +1,11 @@
 """An initial guess from clicked pairs (a folder of the Seed tab): pick a lidar point in the 3D
 view, then its pixel on the overlay; with four or more pairs, PnP (OpenCV) gives the seed.
 
+Picking mode (Start picking ... Stop picking) looks through the camera in the 3D view, dims the
+points the camera cannot see (only the others can be picked), widens the 3D view and arms the
+next pick after each pair, so pair after pair is two clicks. Markers grow with their distance
+from the camera, so they stay a few pixels wide at any range.
+
 The pairs live in an editable text field, one ``x y z u v`` line each (lidar metres, map
 pixels), so they can be corrected, pasted, and saved with the seed.
 """
@@ -12,12 +17,19 @@ import viser
 
 from ..context import Workbench
 from ..exact import parse_number
-from ..pairs import MIN_PAIRS, Pair, nearest_point_to_ray, reprojection_errors, solve_pnp
+from ..overlay import project_scene
+from ..pairs import (MIN_PAIRS, Pair, nearest_point_to_ray, pair_spread, reprojection_errors, solve_pnp,
+                     translation_warning)
 from ..text import num
 
-HELP = ("**Pick a pair**, click a lidar point in the 3D view, then the same spot on the overlay. "
+HELP = ("**Start picking**: the 3D view looks through the camera (points it cannot see are dimmed); "
+        "click a lidar point there, then the same spot on the overlay, and again for the next pair. "
         f"With {MIN_PAIRS} or more pairs, **Solve PnP** sets the extrinsic (one undo step). "
+        "Pick near and far points spread over the image: far-only pairs leave the translation loose. "
         "Lines `x y z u v` below can be edited.")
+MARKER_RAD = 0.006  # marker radius per metre of distance from the camera (a few pixels at any range)
+MIN_MARKER_M = 0.03
+DEFAULT_BOUND_M = 0.2  # the optimiser's default translation bound, when the Optimise field holds none
 
 
 def parse_pairs(text: str) -> tuple[list[Pair], list[str]]:
@@ -46,8 +58,9 @@ class PairsPanel:
         gui = app.server.gui
         with gui.add_folder("Initial guess from clicked pairs", expand_by_default=False):
             gui.add_markdown(HELP)
-            self.pick = gui.add_button("Pick a pair", icon=viser.Icon.POINTER,
-                                       hint="Then click a lidar point in the 3D view, then its pixel on the overlay")
+            self.pick = gui.add_button("Start picking", icon=viser.Icon.POINTER,
+                                       hint="Look through the camera in the 3D view; then click a lidar point "
+                                            "there and its pixel on the overlay, pair after pair")
             self.status = gui.add_markdown("")
             self.text = gui.add_text("Pairs", "", multiline=True, hint="x y z (lidar, m)  u v (map pixels)")
             self.table = gui.add_markdown("")
@@ -56,37 +69,68 @@ class PairsPanel:
                                         hint=f"OpenCV solvePnP (SQPnP + refinement) over the pairs; needs {MIN_PAIRS}")
         self.pending: tuple[float, float, float] | None = None
         self.armed = False
+        self.picking = False
         self._marker = None
-        self.pick.on_click(lambda event: self.arm())
+        self._pair_markers: list = []
+        self.pick.on_click(lambda event: self.set_picking(not self.picking))
         self.text.on_update(lambda _: self.show())
         self.edit.on_click(lambda event: self._edit(self.edit.value))
         self.solve.on_click(self._on_solve)
 
     # --- picking -------------------------------------------------------------------------------
+    def set_picking(self, on: bool) -> None:
+        """Enter or leave picking mode (the 3D view through the camera, a wider 3D view)."""
+        self.picking = bool(on)
+        self.pick.label = "Stop picking" if self.picking else "Start picking"
+        self.pick.color = "orange" if self.picking else None
+        self.app.picking_changed(self.picking)
+        if self.picking:
+            self.arm()
+        else:
+            self.app.server.scene.remove_click_callback()
+            self.armed, self.pending = False, None
+            self._remove_marker()
+            self.status.content = ""
+        self.show()
+
     def arm(self) -> None:
         """Wait for a click on a lidar point in the 3D view."""
         self.armed, self.pending = True, None
-        self.status.content = "Click a lidar point in the **3D view**..."
+        self.status.content = f"Pair {len(self.pairs()) + 1}: click a lidar point in the **3D view**..."
         scene = self.app.server.scene
         scene.remove_click_callback()
         scene.on_click()(self._on_scene_click)
 
     def _on_scene_click(self, event) -> None:
-        index = self.app.state.snapshot().selected
-        points = self.app.displays[index].scene.points
+        snap = self.app.state.snapshot()
+        points = self.app.displays[snap.selected].scene.points
         k = nearest_point_to_ray(points, event.ray_origin, event.ray_direction, max_angle_deg=1.0)
         if k is None:
             self.status.content = "No lidar point near that click; click closer to a point."
             return
         self.point_picked(tuple(float(a) for a in points[k]))
 
+    def marker_radius(self, point) -> float:
+        """Metres: a fixed angle seen from the camera, so a marker 40 m away is as visible as one at 4 m."""
+        centre = self.app.state.snapshot().extrinsic.inverse().translation
+        return max(MIN_MARKER_M, MARKER_RAD * float(np.linalg.norm(np.asarray(point) - centre)))
+
     def point_picked(self, point: tuple[float, float, float]) -> None:
         self.app.server.scene.remove_click_callback()
         self.pending = point
-        self._marker = self.app.server.scene.add_icosphere("/pair_pick", radius=0.08, color=(255, 0, 200),
-                                                           position=point)
+        self._remove_marker()
+        self._marker = self.app.server.scene.add_icosphere("/pair_pick", radius=self.marker_radius(point),
+                                                           color=(255, 0, 200), position=point)
+        seen = project_scene(np.asarray([point]), self.app.state.snapshot().extrinsic, self.app.camera).index.size
         self.status.content = (f"Lidar point ({', '.join(f'{a:.3f}' for a in point)}) m. "
-                               "Now click the same spot on the **overlay**.")
+                               "Now click the same spot on the **overlay**."
+                               + ("" if seen else "  \n⚠ At the current extrinsic the camera does not see this "
+                                  "point (a dimmed one): is it the one you meant? Stop picking removes it."))
+
+    def _remove_marker(self) -> None:
+        if self._marker is not None:
+            self._marker.remove()
+            self._marker = None
 
     def wants_pixel(self) -> bool:
         return self.armed and self.pending is not None
@@ -98,11 +142,13 @@ class PairsPanel:
         text = self.text.value.rstrip("\n")
         self.text.value = (text + "\n" if text else "") + format_pair(pair)
         self.armed, self.pending = False, None
-        if self._marker is not None:
-            self._marker.remove()
-            self._marker = None
-        self.status.content = "Pair added."
+        self._remove_marker()
         self.show()
+        if self.picking:
+            self.arm()  # straight on to the next pair: no button to press again
+            self.status.content = "Pair added. " + self.status.content
+        else:
+            self.status.content = "Pair added."
 
     # --- the list ------------------------------------------------------------------------------
     def pairs(self) -> list[Pair]:
@@ -129,6 +175,19 @@ class PairsPanel:
             rows.append(f"{len(pairs)} of {MIN_PAIRS} pairs needed for PnP.")
         rows += [f"⚠ {p}" for p in problems]
         self.table.content = "\n".join(rows)
+        self._show_pair_markers(pairs)
+
+    def _show_pair_markers(self, pairs: list[Pair]) -> None:
+        """A green marker on each pair's lidar point while picking (none otherwise)."""
+        for m in self._pair_markers:
+            m.remove()
+        self._pair_markers = []
+        if not self.picking:
+            return
+        scene = self.app.server.scene
+        for k, p in enumerate(pairs):
+            self._pair_markers.append(scene.add_icosphere(f"/pairs/{k}", radius=self.marker_radius(p.point),
+                                                          color=(40, 220, 90), position=p.point))
 
     def _on_solve(self, event) -> None:
         pairs = self.pairs()
@@ -142,3 +201,16 @@ class PairsPanel:
         self.show()
         self.status.content = (f"PnP over {len(pairs)} pairs: reprojection error median "
                                f"{num(float(np.median(errors)), 2)} px, max {num(float(np.max(errors)), 2)} px.")
+        warning = translation_warning(pair_spread(ext, pairs, self.app.camera), self._loose_limit())
+        if warning:
+            self.status.content += f"  \n⚠ {warning}"
+            self.app.notify(event.client, "The translation is not pinned", warning, color="yellow")
+
+    def _loose_limit(self) -> float:
+        """m, 1 sigma: a third of the optimiser's translation bound, so that the optimiser's search
+        (seed ± bound) holds the truth with 3-sigma margin."""
+        try:
+            bound = self.app.run_settings().translation_bound
+        except ValueError:
+            bound = DEFAULT_BOUND_M
+        return (bound if bound > 0 else DEFAULT_BOUND_M) / 3.0

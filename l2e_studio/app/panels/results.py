@@ -64,6 +64,8 @@ class ResultPanel:
         self._saved_for = result
         self.saved.content = f"Saved `{path}`" + (f"  \nand `{png}`" if png else "")
         self.app.notify(event.client, "Result saved", body, color="green")
+        if event.client is not None:  # on this computer too (over SSH the server's folder is elsewhere)
+            event.client.send_file_download(path.name, path.read_bytes())
 
     def show(self, snap: Snapshot, held_out: Sequence[HeldOutScore] = (), scores: ResultScores | None = None) -> None:
         r = snap.result

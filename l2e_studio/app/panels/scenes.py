@@ -3,10 +3,14 @@ see every scene's score at the current extrinsic and the scenes that failed to l
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import yaml
 
+from ...errors import InputError
+from ...io.safe_load import parse_yaml, read_text_capped
 from ..browser_js import KEY_HANDLING_HTML, hide_inputs
 from ..context import Workbench
 from ..readout import MiReading
@@ -28,12 +32,28 @@ def scene_order(key: str, names: Sequence[str], points: Sequence[int], mi: Seque
     return sorted(idx, key=lambda i: names[i])
 
 
+def first_steps_hint(root: Path) -> str:
+    """What to press first, for a synthetic set whose ``truth.yaml`` says how far off its seed is
+    (the embedded sample, anything ``l2e-studio synth`` wrote); "" for any other folder."""
+    path = Path(root) / "truth.yaml"
+    try:
+        err = parse_yaml(path, read_text_capped(path, 1 << 20)).get("seed_error") if path.is_file() else None
+        deg, m = float(err["rotation_deg"]), float(err["translation_m"])
+    except (InputError, OSError, yaml.YAMLError, ValueError, TypeError, KeyError, AttributeError):  # no hint, no harm
+        return ""
+    return (f"**First steps** · this synthetic set's seed is off on purpose, by {deg:.1f}° and {100 * m:.1f} cm "
+            "(`truth.yaml`): the points sit beside the edges they belong to. Press **Start** in the "
+            "**Optimise** tab, compare in **Before / after**, then accept the result in the **Result** tab.")
+
+
 class ScenesPanel:
     def __init__(self, app: Workbench) -> None:
         self.app = app
         gui = app.server.gui
         ss = app.scene_set
         names = app.state.scene_names
+        hint = first_steps_hint(ss.root)
+        self.hint = gui.add_markdown(hint, visible=bool(hint))
         gui.add_markdown(f"**{len(names)} scenes** from `{ss.root}`"
                          + (f" · **{len(ss.failures)} failed to load**" if ss.failures else ""))
         self.dropdown = gui.add_dropdown("Scene", names, initial_value=names[0])

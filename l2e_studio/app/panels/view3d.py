@@ -9,10 +9,19 @@ import viser
 from scipy.spatial.transform import Rotation
 
 from ..context import Workbench
+from ...camera import CameraModel
 from ...geometry import Extrinsic
+from ..overlay import project_scene
 
 FRUSTUM_SCALE = 0.6  # m
 GIZMO_SCALE = 0.9
+DIMMED = 0.25  # brightness of the points the camera cannot see, while picking
+#: m: the near plane while looking through the camera. Points right at the eye would be drawn
+#: as sprites covering the view (and cost a browser without a GPU seconds per frame).
+PICKING_NEAR_M = 0.5
+#: deg: the widest vertical view while looking through the camera (a wide camera's edges are
+#: cut off in a narrow viewport rather than the view distorted, which also stalls the page's renderer)
+MAX_FOV_DEG = 100.0
 
 
 def camera_pose(extrinsic: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
@@ -29,6 +38,27 @@ def extrinsic_from_pose(wxyz: np.ndarray, position: np.ndarray) -> Extrinsic:
 
 
 FINE_FACTOR = 0.1
+
+
+def camera_viewpoint(extrinsic: Extrinsic, camera: CameraModel, aspect: float) -> dict:
+    """Where a 3D viewer looks through the camera at ``extrinsic``: position, look-at point, up
+    direction (the image's up, in the lidar frame) and a vertical field of view wide enough to
+    show the whole image in a viewport ``aspect`` (width / height) wide, up to ``MAX_FOV_DEG``."""
+    inv = extrinsic.inverse()
+    pos, R = inv.translation, inv.R  # camera centre and axes (x right, y down, z forward) in the lidar frame
+    v_half = np.arctan2(camera.height / 2.0, camera.K[1, 1])
+    h_half = np.arctan2(camera.width / 2.0, camera.K[0, 0])
+    fov = 2.0 * max(v_half, np.arctan(np.tan(h_half) / max(float(aspect), 1e-3)))
+    return {"position": pos, "look_at": pos + 10.0 * R[:, 2], "up": -R[:, 1], "fov": float(min(fov, np.radians(MAX_FOV_DEG)))}
+
+
+def in_view_colors(points: np.ndarray, colors: np.ndarray, extrinsic: Extrinsic, camera: CameraModel) -> np.ndarray:
+    """``colors`` with every point the camera cannot see at ``extrinsic`` dimmed to a quarter."""
+    seen = np.zeros(len(points), bool)
+    seen[project_scene(points, extrinsic, camera).index] = True
+    out = (colors.astype(np.float32) * DIMMED).astype(np.uint8)
+    out[seen] = colors[seen]
+    return out
 
 
 def scaled_gizmo_step(current: Extrinsic, before: tuple, after: tuple, factor: float) -> Extrinsic:
@@ -70,12 +100,47 @@ class View3D:
         self.fine = app.server.gui.add_checkbox(
             "Fine gizmo (1/10)", False, hint="A gizmo drag moves the camera a tenth as far (it catches up when you let go)")
         self._last_pose = (np.asarray(wxyz, float), np.asarray(pos, float))  # the gizmo pose last seen
+        self.picking = False
+
+    # --- picking mode (pairs for PnP) ------------------------------------------------------------
+    def set_picking(self, on: bool) -> None:
+        """Picking: every tab looks through the camera at the current extrinsic, the points it
+        can see keep their colours and the others are dimmed; the gizmo and frustum (which sit
+        at the eye) are hidden. Off: all back as it was."""
+        self.picking = bool(on)
+        self.gizmo.visible = self.frustum.visible = not self.picking
+        self._colour_cloud()
+        if self.picking:
+            self.look_through_camera()
+        else:
+            self.reset_viewpoint()
+
+    def look_through_camera(self) -> None:
+        ext = self.app.state.snapshot().extrinsic
+        for client in self.app.server.get_clients().values():
+            try:
+                view = camera_viewpoint(ext, self.app.camera, client.camera.aspect or 1.6)
+                client.camera.fov = view["fov"]
+                client.camera.near = PICKING_NEAR_M
+                client.camera.up_direction = tuple(view["up"])
+                client.camera.position = tuple(view["position"])
+                client.camera.look_at = tuple(view["look_at"])
+            except Exception:  # a tab closing right now
+                continue
+
+    def _colour_cloud(self) -> None:
+        points, colors = self.app.displays[self.shown_scene].cloud()
+        if self.picking:
+            colors = in_view_colors(points, colors, self.app.state.snapshot().extrinsic, self.app.camera)
+        self.cloud.colors = colors
 
     def reset_viewpoint(self) -> None:
         """Every tab's 3D viewpoint back to the start-up one."""
         ic = self.app.server.initial_camera
         for client in self.app.server.get_clients().values():
             try:
+                client.camera.fov = ic.fov
+                client.camera.near = ic.near
                 client.camera.up_direction = ic.up
                 client.camera.position = ic.position
                 client.camera.look_at = ic.look_at
@@ -107,6 +172,8 @@ class View3D:
         self.gizmo.wxyz = wxyz
         self.gizmo.position = pos
         self._last_pose = (np.asarray(wxyz, float), np.asarray(pos, float))
+        if self.picking:
+            self._colour_cloud()  # what the camera sees moves with it
 
     def show_scene(self, index: int) -> None:
         if index == self.shown_scene:
@@ -114,9 +181,9 @@ class View3D:
         disp = self.app.displays[index]
         points, colors = disp.cloud()
         self.cloud.points = points.astype(np.float32)
-        self.cloud.colors = colors
-        self.frustum.image = disp.thumbnail()
         self.shown_scene = index
+        self._colour_cloud()
+        self.frustum.image = disp.thumbnail()
 
     def show_map(self, index: int) -> None:
         """Scene ``index``'s map changed: redraw the camera's thumbnail if it shows that scene."""
