@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app_fixtures import free_port, write_small_scenes
+from app_fixtures import free_port, wait_for, write_small_scenes
 from l2e_studio.app.panels.view3d import camera_pose, extrinsic_from_pose
 from l2e_studio.app.pose import sliders_from_extrinsic
 from l2e_studio.calibrate import CalibrationSettings
@@ -84,6 +84,9 @@ def test_scene_switch_changes_cloud_overlay_and_readout(app):
     app.select_scene(1)
     idle(app)
     assert app.state.snapshot().selected == 1
+    # the cloud follows the overlay's frame at rest (drawing it must not hold up the new overlay)
+    wait_for(lambda: app.view3d.shown_scene == 1, what="the 3D cloud of scene_001")
+    assert app.overlay.rest_frame
     assert not np.array_equal(np.array(app.view3d.cloud.points), cloud0)
     assert not np.array_equal(app.overlay.image.image, image0)
     assert "scene_001" in app.overlay.caption.content and "scene_001" in app.extrinsic.readout.content
@@ -255,3 +258,25 @@ def test_camera_images_are_read_out_and_optimised_with_the_edge_score(tmp_path):
             assert a.state.snapshot().result.objective == name
         finally:
             a.stop()
+
+
+def test_the_frame_at_rest_reuses_the_previews_drawing_and_shows_the_same_overlay(app):
+    from l2e_studio.app.panels.overlay_view import display_sized
+
+    idle(app)
+    wait_for(lambda: app.overlay.rest_frame, what="the first frame at rest")
+    drawn = []
+    draw_view = app.overlay._draw_view
+    app.overlay._draw_view = lambda *a: drawn.append(a[2]) or draw_view(*a)
+    ext = app.state.snapshot().extrinsic.perturbed([0.01, 0, 0], [0, 0.004, 0])
+    frames = app.overlay.frames
+    app.set_extrinsic(ext, source="sliders")
+    wait_for(lambda: app.overlay.frames >= frames + 2 and app.overlay.rest_frame, what="preview, then the frame at rest")
+    assert len(drawn) == 1 and drawn[0] is ext  # drawn once for the preview; the frame at rest reused it
+    expected = display_sized(app.overlay.draw(0, ext), app.overlay.image.image.shape[1])
+    np.testing.assert_array_equal(app.overlay.image.image, expected)
+    # another look (point size) is drawn anew
+    app.overlay.point_size.value = 5  # runs the display callback
+    wait_for(lambda: len(drawn) == 2 and app.overlay_worker.wait_idle(5), what="the new point size drawn")
+    expected = display_sized(app.overlay.draw(0, ext), app.overlay.image.image.shape[1])
+    np.testing.assert_array_equal(app.overlay.image.image, expected)

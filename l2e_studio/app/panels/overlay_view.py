@@ -158,6 +158,7 @@ class OverlayPanel:
         self.window_size.on_update(self._on_window_size)
         self.display_width = DISPLAY_WIDTH  # frames are sent at most this wide
         self._fitted: dict[tuple, int | None] = {}  # the width the last frame of a kind fitted the budget at
+        self._drawn: tuple | None = None  # the last frame's (what was drawn, drawing, projection, display)
         self.panel.dock_left()
         self.panel.set_width(PANEL_WIDTH)
 
@@ -188,15 +189,15 @@ class OverlayPanel:
         style = self.style()
         index, extrinsic = snap.selected, snap.shown_extrinsic
         disp = self.app.displays[index]
-        projection = None
-        if self.view.value == "edges" or style.color_by == "depth":
-            projection = project_scene(disp.scene.points, extrinsic, self.app.camera)
-        if self.view.value == "edges":
-            assert projection is not None
-            normalised = disp.normalised("smoothed", self.app.readout.sigma)  # edges of the map the MI sees
-            image = edge_view(normalised, projection.uv, projection.depth)
+        # a frame at rest shows what the preview before it showed: its drawing is reused, and
+        # only the resize and the encoding at the better quality remain
+        what = (id(disp), extrinsic.params.tobytes(), style, self.view.value, self.map_mode.value,
+                self.app.readout.sigma)
+        if self._drawn is not None and self._drawn[0] == what:
+            image, projection = self._drawn[1], self._drawn[2]
         else:
-            image = self.draw(index, extrinsic, style)
+            image, projection = self._draw_view(disp, index, extrinsic, style)
+            self._drawn = (what, image, projection, disp)  # disp held: its id stays its own
         zoom = self.zoom.value
         window = zoom_window(image.shape, zoom, self.centre, self.display_width)
         width = self.display_width if rest else min(self.display_width, DISPLAY_WIDTH)
@@ -206,13 +207,13 @@ class OverlayPanel:
         css = IMAGE_CSS["fit" if zoom == "fit" else "zoomed"]
         if self.image_css.content != css:
             self.image_css.content = css
-        key = (rest, zoom, self.view.value, width)  # what the width that fitted last depends on
+        fit_key = (rest, zoom, self.view.value, width)  # what the width that fitted last depends on
         # one resize, straight to the width that fitted last time (or to the full width)
         image, data, quality = jpeg_within(image, FRAME_BYTES, REST_QUALITIES if rest else PREVIEW_QUALITIES,
-                                           self._fitted.get(key) or full)
+                                           self._fitted.get(fit_key) or full)
         # remember a shrunk width (start there next time); a frame that fits at full width
         # forgets it, so the next one tries full width again
-        self._fitted[key] = image.shape[1] if image.shape[1] < full else None
+        self._fitted[fit_key] = image.shape[1] if image.shape[1] < full else None
         send_jpeg(self.image, image, data)
         self.window, self.rest_frame = window, rest
         self.frame_bytes, self.frame_quality = len(data), quality
@@ -223,6 +224,16 @@ class OverlayPanel:
             legend = EDGE_LEGEND
         if legend != self.legend.content:
             self.legend.content = legend
+
+    def _draw_view(self, disp, index: int, extrinsic, style: OverlayStyle):
+        """(the full-size image of the chosen view, the projection when the view needs it)."""
+        projection = None
+        if self.view.value == "edges" or style.color_by == "depth":
+            projection = project_scene(disp.scene.points, extrinsic, self.app.camera)
+        if self.view.value == "edges":
+            normalised = disp.normalised("smoothed", self.app.readout.sigma)  # edges of the map the MI sees
+            return edge_view(normalised, projection.uv, projection.depth), projection
+        return self.draw(index, extrinsic, style), projection
 
     # --- layout --------------------------------------------------------------------------------
     def _on_window_size(self, event) -> None:
