@@ -164,9 +164,17 @@ class Page:
         self.origin = self.page.evaluate("() => performance.timeOrigin")
 
     def settle(self, extra: float = 0.6) -> None:
-        self.app.overlay_worker.wait_idle(30)
+        """Wait until the page has the frame at rest of the current state, then ``extra`` s more."""
+        time.sleep(0.05)  # the last key press reaches the server
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            version = self.app.state.snapshot().version
+            shown = [f for f in self.log.frames.values() if f[3] and f[1] >= version]
+            if shown and self.app.overlay_worker.wait_idle(0):
+                break
+            time.sleep(0.02)
         self.app.mi_worker.wait_idle(60)
-        time.sleep(extra)  # the frame at rest (0.3 s), the scene table, the 3D view follow
+        time.sleep(extra)  # the page paints it; the scene table and the 3D view follow
 
     def focus_slider(self) -> None:
         label = self.page.locator("label", has_text="yaw (°)").first.get_attribute("for")
