@@ -109,7 +109,9 @@ class ServerLog:
 
     def __init__(self, app) -> None:
         self.changes: list[tuple[float, int]] = []  # (t, state version after it)
-        self.frames: dict[str, tuple[float, int, int, bool, int]] = {}  # sha -> (t, version, scene, rest, bytes)
+        # sha -> every sending of those bytes: (t, version, scene, rest, bytes); nudging back and
+        # forth sends the same picture again for a newer state
+        self.frames: dict[str, list[tuple[float, int, int, bool, int]]] = {}
         state, set_ext = app.state, app.set_extrinsic
         send = overlay_view.send_jpeg
 
@@ -123,7 +125,7 @@ class ServerLog:
             sha = hashlib.sha1(data).hexdigest()[:16]
             meta = getattr(app.overlay, "sending", None)
             version, scene, is_rest = meta if meta is not None else (-1, -1, False)
-            self.frames.setdefault(sha, (time.time() * 1e3, version, scene, is_rest, len(data)))
+            self.frames.setdefault(sha, []).append((time.time() * 1e3, version, scene, is_rest, len(data)))
             return send(handle, image, data)
 
         app.set_extrinsic = timed_set
@@ -163,18 +165,23 @@ class Page:
         assert self.page.evaluate(OBSERVE), "score readout element not found"
         self.origin = self.page.evaluate("() => performance.timeOrigin")
 
-    def settle(self, extra: float = 0.6) -> None:
-        """Wait until the page has the frame at rest of the current state, then ``extra`` s more."""
-        time.sleep(0.05)  # the last key press reaches the server
-        deadline = time.monotonic() + 20
+    def settle(self, changes: int | None = None, extra: float = 0.4) -> None:
+        """Wait until ``changes`` slider changes reached the server (if given) and the page has
+        painted the frame at rest of the current state; then ``extra`` s more (readout, table)."""
+        deadline = time.monotonic() + 30
+        while changes is not None and len(self.log.changes) < changes and time.monotonic() < deadline:
+            time.sleep(0.01)
+        version = self.app.state.snapshot().version
         while time.monotonic() < deadline:
-            version = self.app.state.snapshot().version
-            shown = [f for f in self.log.frames.values() if f[3] and f[1] >= version]
-            if shown and self.app.overlay_worker.wait_idle(0):
+            painted = self.page.evaluate("() => window.__b ? window.__b.frames.map(f => [f[0], f[3]]) : null")
+            if painted is None:  # not observing yet: the server's frame at rest will do
+                if self.app.overlay_worker.wait_idle(0) and self.app.overlay.rest_frame:
+                    break
+            elif any((f := self.sent(sha, t)) is not None and f[3] and f[1] >= version for t, sha in painted):
                 break
-            time.sleep(0.02)
+            time.sleep(0.03)
         self.app.mi_worker.wait_idle(60)
-        time.sleep(extra)  # the page paints it; the scene table and the 3D view follow
+        time.sleep(extra)
 
     def focus_slider(self) -> None:
         label = self.page.locator("label", has_text="yaw (°)").first.get_attribute("for")
@@ -186,11 +193,15 @@ class Page:
                                " window.__b.long = []; return out; }")
         return d[0], d[1], d[2], d[3]
 
+    def sent(self, sha: str, before: float) -> tuple | None:
+        """The server's last sending of these bytes before page time ``before``."""
+        return next((r for r in reversed(self.log.frames.get(sha, [])) if r[0] - self.origin <= before), None)
+
     def frames(self, raw: list) -> list[dict]:
         """Painted frames, in page time, with the server's record of each."""
         out = []
         for t_src, t_dec, t_paint, sha in raw:
-            sent = self.log.frames.get(sha)
+            sent = self.sent(sha, t_src)
             out.append(dict(src=t_src, dec=t_dec, paint=t_paint, sent=None if sent is None else sent[0] - self.origin,
                             version=-1 if sent is None else sent[1], scene=-1 if sent is None else sent[2],
                             rest=bool(sent and sent[3]), bytes=0 if sent is None else sent[4]))
@@ -201,34 +212,38 @@ def first(frames: list[dict], t: float, pred=lambda f: True) -> dict | None:
     return next((f for f in frames if f["paint"] > t and pred(f)), None)
 
 
+def change_after(p: Page, changes: list[tuple[float, int]], t: float) -> tuple[float, int] | None:
+    """The first slider change the server received after the page's input at ``t`` (page time,
+    server stamps are epoch ms: one machine, one clock): (received, state version)."""
+    return next(((r - p.origin, v) for r, v in changes if r - p.origin >= t), None)
+
+
 def steps(p: Page, presses: int) -> dict:
-    """One press, then rest, ``presses`` times."""
+    """One press, then rest (the page painted the frame at rest), ``presses`` times."""
     p.focus_slider()
     p.data()
     n0 = len(p.log.changes)
     for i in range(presses):
         p.page.keyboard.press("ArrowRight" if i % 2 == 0 else "ArrowLeft")
-        p.settle()
+        p.settle(n0 + i + 1)
     inputs, raw, readouts, long = p.data()
-    frames = p.frames(raw)
-    changes = p.log.changes[n0:]
-    versions = [v for _, v in changes] if len(changes) == len(inputs) else [None] * len(inputs)
+    frames, changes = p.frames(raw), p.log.changes[n0:]
     first_change, rest, readout, legs = [], [], [], []
-    for t, v in zip(inputs, versions):
+    for t in inputs:
         f = first(frames, t)
         first_change.append(None if f is None else f["paint"] - t)
-        r = first(frames, t, lambda f: f["rest"] and (v is None or f["version"] >= v))
-        rest.append(None if r is None else r["paint"] - t)
         ro = next((x for x in readouts if x > t), None)
         readout.append(None if ro is None else ro - t)
-    for (t_recv, v), t in zip(changes, inputs):
+        got = change_after(p, changes, t)
+        if got is None:
+            continue
+        recv, v = got
+        r = first(frames, t, lambda f: f["rest"] and f["version"] >= v)
+        rest.append(None if r is None else r["paint"] - t)
         f = first(frames, t, lambda f: f["version"] >= v)
-        if f is not None and f["sent"] is not None and len(changes) == len(inputs):
-            recv = t_recv - p.origin
+        if f is not None and f["sent"] is not None:
             legs.append((recv - t, f["sent"] - recv, f["src"] - f["sent"], f["dec"] - f["src"], f["paint"] - f["dec"]))
-    busy = sum(d for _, d in long)
-    return dict(first=first_change, rest=rest, readout=readout, legs=legs, long=(len(long), busy),
-                matched=len(changes) == len(inputs))
+    return dict(first=first_change, rest=rest, readout=readout, legs=legs, long=(len(long), sum(d for _, d in long)))
 
 
 def held_key(p: Page, presses: int, repeat_ms: float) -> dict:
@@ -241,15 +256,15 @@ def held_key(p: Page, presses: int, repeat_ms: float) -> dict:
         time.sleep(repeat_ms / 1000.0)
     p.page.keyboard.up("ArrowRight")
     p.page.keyboard.up("ArrowLeft")
-    p.settle(1.0)
+    time.sleep(0.5)
+    p.settle(extra=1.0)
     inputs, raw, _, long = p.data()
-    frames = p.frames(raw)
-    changes = p.log.changes[n0:]
+    frames, changes = p.frames(raw), p.log.changes[n0:]
     lat = []
-    if len(changes) == len(inputs):
-        for t, (_, v) in zip(inputs, changes):
-            f = first(frames, t, lambda f: f["version"] >= v)
-            lat.append(None if f is None else f["paint"] - t)
+    for t in inputs:
+        got = change_after(p, changes, t)
+        f = None if got is None else first(frames, t, lambda f: f["version"] >= got[1])
+        lat.append(None if f is None else f["paint"] - t)
     kb = [f["bytes"] / 1000 for f in frames if f["bytes"]]
     return dict(lat=lat, kb=kb, frames=len(frames), inputs=len(inputs), changes=len(changes),
                 long=(len(long), sum(d for _, d in long)))
