@@ -1,24 +1,39 @@
-"""Slider change -> overlay changed *in the browser*, at N full-size scenes (default 40).
+"""What a person sees: key press on the seed slider -> the new overlay *painted*, in a real browser.
 
-A real app (viser server in this process) and headless Debian Chromium (Playwright). In the
-page, a ``keydown`` listener stamps each input, a ``MutationObserver`` stamps each new overlay
-image (``src`` swapped to a new blob) once the browser has decoded it, and the blob's size is
-what was shipped for that update. A second observer stamps the MI readout's text changes.
+A real app (viser server in this process, 40 full-size scenes by default) and headless Debian
+Chromium (Playwright), at each ``--viewport`` and each ``--delay-ms`` (0: direct; 40: through
+``delay_proxy.py``, 40 ms each way, the bytes of the page and its websocket alike).
 
-Two patterns of input on the focused yaw slider (one 0.1 deg step per key press):
-- ``steps``: one press, then wait until the page settles (a person nudging);
-- ``drag``: a press every ``--drag-ms`` (a drag: inputs arrive faster than frames).
-Latency of an input = first overlay frame decoded after it - the input. Bytes per update =
-mean size of the images that arrived while inputs were coming (the per-tab cost).
+In the page, every time is ``performance.now()``:
+- an input is the focused yaw slider's ``keydown``, stamped at ``event.timeStamp`` (when the
+  browser made the event: a busy page that handles it late is counted, not hidden);
+- a frame is painted when its ``<img>`` got the new ``src``, ``img.decode()`` resolved, the next
+  animation frame ran and a task after it (the paint of that animation frame) began;
+- the readout is painted likewise after its text changed.
+Each frame the page paints is matched to the frame the server sent (SHA-1 of the JPEG), so it is
+known which input (state version), scene and kind (preview / at rest) it shows.
 
-Run: ``python benchmarks/bench_browser_overlay.py [--scenes 40] [--presses 30]``.
-Targets (issue 10): median <= 100 ms, p95 <= 200 ms, <= 60 KB per update per tab.
+Measured, median / p95 over inputs:
+- ``first change``: one press, then rest: the key press -> the first new overlay painted;
+- ``at rest``: the same press -> the frame at rest painted (quiet time + render + transport);
+- ``readout``: the same press -> the score readout painted;
+- ``held key``: a key held down (auto-repeat every ``--repeat-ms``): each input -> the first
+  painted frame that shows it (or a later input); bytes per update;
+- ``scene switch``: a click on a scene table row -> that scene's overlay painted.
+``legs`` splits the first change: key -> server got the change -> frame handed to viser ->
+``src`` set in the page -> decoded -> painted.
+
+Run: ``python benchmarks/bench_browser_overlay.py [--viewports 1366x768,1920x1080] [--delays 0,40]``.
+Targets (issue 17): first change <= 100 ms median / <= 200 ms p95 direct, <= RTT + 100 ms
+through the proxy; frame at rest <= 400 ms; scene switch <= 300 ms.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
+import threading
 import time
 from pathlib import Path
 from tempfile import mkdtemp
@@ -27,7 +42,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_overlay import event_map_for, full_size_scene  # noqa: E402
+from delay_proxy import DelayProxy  # noqa: E402
 
+from l2e_studio.app.panels import overlay_view  # noqa: E402
 from l2e_studio.app.screenshot import CHROMIUM_ARGS, free_port  # noqa: E402
 from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES, Extrinsic  # noqa: E402
 from l2e_studio.scenes import Scene, SceneSet  # noqa: E402
@@ -36,26 +53,40 @@ CHROMIUM = "/usr/bin/chromium"
 
 OBSERVE = """
 () => {
-  window.__inputs = []; window.__frames = []; window.__readouts = [];
-  document.addEventListener('keydown', () => window.__inputs.push(performance.now()), true);
+  const W = window.__b = {inputs: [], frames: [], readouts: [], long: []};
+  document.addEventListener('keydown', (e) => W.inputs.push(e.timeStamp), true);
+  const painted = (cb) => requestAnimationFrame(() => {
+    const ch = new MessageChannel(); ch.port1.onmessage = () => cb(performance.now()); ch.port2.postMessage(0);
+  });
   const overlay = () => document.querySelector("img[src^='blob:']");
+  const onImage = (img) => {
+    const tSrc = performance.now(), src = img.src;
+    const bytes = fetch(src).then(r => r.arrayBuffer()).catch(() => null);  // before the URL is revoked
+    img.decode().then(() => {
+      const tDec = performance.now();
+      painted((tPaint) => bytes.then(async (buf) => {
+        let sha = '';
+        if (buf) sha = Array.from(new Uint8Array(await crypto.subtle.digest('SHA-1', buf)))
+                           .map(b => b.toString(16).padStart(2, '0')).join('').slice(0, 16);
+        W.frames.push([tSrc, tDec, tPaint, sha]);
+      }));
+    }).catch(() => {});  // replaced before it was decoded: never painted
+  };
   new MutationObserver((muts) => {
     for (const m of muts) {
       const img = m.target;
-      if (!(img instanceof HTMLImageElement) || img !== overlay() || !img.src.startsWith('blob:')) continue;
-      const src = img.src;
-      img.decode().then(() => {
-        const t = performance.now();
-        fetch(src).then(r => r.blob()).then(b => window.__frames.push([t, b.size]))
-                  .catch(() => window.__frames.push([t, -1]));
-      }).catch(() => {});
+      if (img instanceof HTMLImageElement && img === overlay() && img.src.startsWith('blob:')) onImage(img);
     }
   }).observe(document.body, {subtree: true, attributes: true, attributeFilter: ['src']});
   const readout = Array.from(document.querySelectorAll('p, div'))
       .filter(e => e.textContent.includes('included scenes:'))
       .sort((a, b) => a.textContent.length - b.textContent.length)[0];
-  if (readout) new MutationObserver(() => window.__readouts.push(performance.now()))
+  if (readout) new MutationObserver(() => painted((t) => W.readouts.push(t)))
       .observe(readout, {subtree: true, childList: true, characterData: true});
+  try {
+    new PerformanceObserver((l) => { for (const e of l.getEntries()) W.long.push([e.startTime, e.duration]); })
+      .observe({type: 'longtask', buffered: false});
+  } catch (e) {}
   return !!readout;
 }
 """
@@ -68,71 +99,242 @@ def build_scene_set(n: int, points: int, width: int, height: int) -> SceneSet:
     T[:3, 3] = (0.05, -0.1, 0.02)
     seed = Extrinsic.from_matrix(T)
     event_map = event_map_for(pts, seed, camera)
-    # the same picture, in arrays of their own (memory as with n real scenes)
+    # the same picture, in arrays of their own (memory and caches as with n real scenes)
     scenes = [Scene(f"scene_{i:03d}", pts.copy(), intensity.copy(), event_map.copy(), "events") for i in range(n)]
     return SceneSet(Path(mkdtemp(prefix="l2e_bench_")), camera, seed, scenes)
 
 
-RECEIVED: list[float] = []  # epoch ms at which the server received each extrinsic change
-QUEUED: list[float] = []  # epoch ms at which each frame was encoded and queued
+class ServerLog:
+    """Server-side stamps (epoch ms): each slider change received, each frame handed to viser."""
+
+    def __init__(self, app) -> None:
+        self.changes: list[tuple[float, int]] = []  # (t, state version after it)
+        # sha -> every sending of those bytes: (t, version, scene, rest, bytes); nudging back and
+        # forth sends the same picture again for a newer state
+        self.frames: dict[str, list[tuple[float, int, int, bool, int]]] = {}
+        state, set_ext = app.state, app.set_extrinsic
+        send = overlay_view.send_jpeg
+
+        def timed_set(extrinsic, source: str = "", values=None):
+            t = time.time() * 1e3
+            set_ext(extrinsic, source, values)
+            if source == "sliders":
+                self.changes.append((t, state.snapshot().version))
+
+        def logged_send(handle, image, data):
+            sha = hashlib.sha1(data).hexdigest()[:16]
+            meta = getattr(app.overlay, "sending", None)
+            version, scene, is_rest = meta if meta is not None else (-1, -1, False)
+            self.frames.setdefault(sha, []).append((time.time() * 1e3, version, scene, is_rest, len(data)))
+            return send(handle, image, data)
+
+        app.set_extrinsic = timed_set
+        overlay_view.send_jpeg = logged_send
+        render = app.overlay.render
+
+        def tagged_render(snap, rest: bool = True):
+            app.overlay.sending = (snap.version, snap.selected, rest)
+            return render(snap, rest)
+
+        app.overlay.render = tagged_render
 
 
-def instrument(app) -> list[float]:
-    """Time, in the server, from each extrinsic change to the end of the first frame after it."""
-    pending: list[float] = []
-    out: list[float] = []
-    set_ext, render = app.set_extrinsic, app.overlay.render
+def stats(values) -> str:
+    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], float)
+    if v.size == 0:
+        return "n/a"
+    return f"{np.median(v):.0f} / {np.percentile(v, 95):.0f} ms (n={v.size}, max {v.max():.0f})"
 
-    def timed_set(*a, **k):
-        pending.append(time.perf_counter())
-        RECEIVED.append(time.time() * 1e3)
-        return set_ext(*a, **k)
 
-    def timed_render(*a, **k):
-        started = time.perf_counter()
-        done = [t for t in pending if t <= started]
-        render(*a, **k)
-        end = time.perf_counter()
-        QUEUED.append(time.time() * 1e3)
-        out.extend(end - t for t in done)
-        del pending[:len(done)]
+class Page:
+    """One browser tab on the app, with the page-side stamps and their server-side matches."""
 
-    app.set_extrinsic, app.overlay.render = timed_set, timed_render
+    def __init__(self, browser, url: str, viewport: str, log: ServerLog, app, hide_3d: bool = False) -> None:
+        vw, vh = (int(v) for v in viewport.split("x"))
+        self.page = browser.new_page(viewport={"width": vw, "height": vh})
+        self.log, self.app = log, app
+        self.page.goto(url)
+        self.page.get_by_text("Use in optimisation").wait_for(timeout=60_000)
+        for close in self.page.locator(".mantine-Notification-root button").all():
+            close.click()  # viser's "WebGL in software mode" notice may lie over the tabs
+        self.page.get_by_role("tab", name="Seed").click()
+        self.page.get_by_text("included scenes:").wait_for(timeout=60_000)
+        if hide_3d:
+            self.page.add_style_tag(content="canvas { display: none !important; }")
+        self.settle()
+        assert self.page.evaluate(OBSERVE), "score readout element not found"
+        self.origin = self.page.evaluate("() => performance.timeOrigin")
+
+    def settle(self, changes: int | None = None, extra: float = 0.4) -> None:
+        """Wait until ``changes`` slider changes reached the server (if given) and the page has
+        painted the frame at rest of the current state; then ``extra`` s more (readout, table)."""
+        deadline = time.monotonic() + 30
+        while changes is not None and len(self.log.changes) < changes and time.monotonic() < deadline:
+            time.sleep(0.01)
+        version = self.app.state.snapshot().version
+        while time.monotonic() < deadline:
+            painted = self.page.evaluate("() => window.__b ? window.__b.frames.map(f => [f[0], f[3]]) : null")
+            if painted is None:  # not observing yet: the server's frame at rest will do
+                if self.app.overlay_worker.wait_idle(0) and self.app.overlay.rest_frame:
+                    break
+            elif any((f := self.sent(sha, t)) is not None and f[3] and f[1] >= version for t, sha in painted):
+                break
+            time.sleep(0.03)
+        self.app.mi_worker.wait_idle(60)
+        time.sleep(extra)
+
+    def focus_slider(self) -> None:
+        label = self.page.locator("label", has_text="yaw (°)").first.get_attribute("for")
+        self.page.locator(f"[id='{label}']").get_by_role("slider").focus()
+
+    def data(self) -> tuple[list, list, list, list]:
+        d = self.page.evaluate("() => { const b = window.__b; const out = [b.inputs, b.frames, b.readouts, b.long];"
+                               " window.__b.inputs = []; window.__b.frames = []; window.__b.readouts = [];"
+                               " window.__b.long = []; return out; }")
+        return d[0], d[1], d[2], d[3]
+
+    def sent(self, sha: str, before: float) -> tuple | None:
+        """The server's last sending of these bytes before page time ``before``."""
+        return next((r for r in reversed(self.log.frames.get(sha, [])) if r[0] - self.origin <= before), None)
+
+    def frames(self, raw: list) -> list[dict]:
+        """Painted frames, in page time, with the server's record of each."""
+        out = []
+        for t_src, t_dec, t_paint, sha in raw:
+            sent = self.sent(sha, t_src)
+            out.append(dict(src=t_src, dec=t_dec, paint=t_paint, sent=None if sent is None else sent[0] - self.origin,
+                            version=-1 if sent is None else sent[1], scene=-1 if sent is None else sent[2],
+                            rest=bool(sent and sent[3]), bytes=0 if sent is None else sent[4]))
+        return sorted(out, key=lambda f: f["paint"])
+
+
+def first(frames: list[dict], t: float, pred=lambda f: True) -> dict | None:
+    return next((f for f in frames if f["paint"] > t and pred(f)), None)
+
+
+def change_after(p: Page, changes: list[tuple[float, int]], t: float) -> tuple[float, int] | None:
+    """The first slider change the server received after the page's input at ``t`` (page time,
+    server stamps are epoch ms: one machine, one clock): (received, state version)."""
+    return next(((r - p.origin, v) for r, v in changes if r - p.origin >= t), None)
+
+
+def steps(p: Page, presses: int) -> dict:
+    """One press, then rest (the page painted the frame at rest), ``presses`` times."""
+    p.focus_slider()
+    p.data()
+    n0 = len(p.log.changes)
+    for i in range(presses):
+        p.page.keyboard.press("ArrowRight" if i % 2 == 0 else "ArrowLeft")
+        p.settle(n0 + i + 1)
+    inputs, raw, readouts, long = p.data()
+    frames, changes = p.frames(raw), p.log.changes[n0:]
+    first_change, rest, readout, legs = [], [], [], []
+    for t in inputs:
+        f = first(frames, t)
+        first_change.append(None if f is None else f["paint"] - t)
+        ro = next((x for x in readouts if x > t), None)
+        readout.append(None if ro is None else ro - t)
+        got = change_after(p, changes, t)
+        if got is None:
+            continue
+        recv, v = got
+        r = first(frames, t, lambda f: f["rest"] and f["version"] >= v)
+        rest.append(None if r is None else r["paint"] - t)
+        f = first(frames, t, lambda f: f["version"] >= v)
+        if f is not None and f["sent"] is not None:
+            legs.append((recv - t, f["sent"] - recv, f["src"] - f["sent"], f["dec"] - f["src"], f["paint"] - f["dec"]))
+    return dict(first=first_change, rest=rest, readout=readout, legs=legs, long=(len(long), sum(d for _, d in long)))
+
+
+def held_key(p: Page, presses: int, repeat_ms: float) -> dict:
+    """A key held down: inputs every ``repeat_ms``; each input -> the first painted frame showing it."""
+    p.focus_slider()
+    p.data()
+    n0 = len(p.log.changes)
+    for i in range(presses):
+        p.page.keyboard.down("ArrowRight" if (i // 15) % 2 == 0 else "ArrowLeft")
+        time.sleep(repeat_ms / 1000.0)
+    p.page.keyboard.up("ArrowRight")
+    p.page.keyboard.up("ArrowLeft")
+    time.sleep(0.5)
+    p.settle(extra=1.0)
+    inputs, raw, _, long = p.data()
+    frames, changes = p.frames(raw), p.log.changes[n0:]
+    lat = []
+    for t in inputs:
+        got = change_after(p, changes, t)
+        f = None if got is None else first(frames, t, lambda f: f["version"] >= got[1])
+        lat.append(None if f is None else f["paint"] - t)
+    kb = [f["bytes"] / 1000 for f in frames if f["bytes"]]
+    return dict(lat=lat, kb=kb, frames=len(frames), inputs=len(inputs), changes=len(changes),
+                long=(len(long), sum(d for _, d in long)))
+
+
+def scene_switch(p: Page, n_scenes: int, clicks: int) -> list[float]:
+    page = p.page
+    page.get_by_role("tab", name="Scenes").click()
+    page.get_by_role("cell", name="scene_000").first.wait_for(timeout=30_000)
+    rng = np.random.default_rng(0)
+    out = []
+    current = p.app.state.snapshot().selected
+    for k in rng.choice([i for i in range(n_scenes) if i != current], size=min(clicks, n_scenes - 1), replace=False):
+        cell = page.locator("td", has_text=f"scene_{int(k):03d}").first
+        cell.scroll_into_view_if_needed()
+        p.settle()
+        p.data()
+        t_click = page.evaluate("() => performance.now()")
+        cell.dispatch_event("click")
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            f = first(p.frames(page.evaluate("() => window.__b.frames")), t_click, lambda f: f["scene"] == int(k))
+            if f is not None:
+                out.append(f["paint"] - t_click)
+                break
+            time.sleep(0.02)
+    page.get_by_role("tab", name="Seed").click()
     return out
 
 
-def first_after(times: np.ndarray, t: float) -> float | None:
-    later = times[times > t]
-    return float(later.min()) if later.size else None
+def run_one(browser, app, log: ServerLog, url: str, viewport: str, delay: float, args) -> None:
+    rtt = 2 * delay
+    where = "direct" if delay == 0 else f"through the proxy, {delay:g} ms each way (RTT {rtt:g} ms)"
+    print(f"\n== {viewport}, {where}", flush=True)
+    p = Page(browser, url, viewport, log, app, args.hide_3d)
+    parts = args.parts.split(",")
+    try:
+        if "steps" in parts:
+            report_steps(p, args)
+        if "held" in parts:
+            report_held(p, args)
+        if "switch" in parts:
+            sw = scene_switch(p, len(app.state.scene_names), args.clicks)
+            print(f"  scene table row click -> that scene's overlay painted: {stats(sw)}")
+    finally:
+        p.page.close()
 
 
-def latencies(inputs: list[float], frames: list[list[float]]) -> np.ndarray:
-    ft = np.array([f[0] for f in frames]) if frames else np.zeros(0)
-    out = [first_after(ft, t) - t for t in inputs if first_after(ft, t) is not None]
-    return np.array(out)
+def report_steps(p: Page, args) -> None:
+    s = steps(p, args.presses)
+    print(f"  key press -> first overlay change painted: {stats(s['first'])}")
+    print(f"  key press -> frame at rest painted:        {stats(s['rest'])}")
+    print(f"  key press -> score readout painted:        {stats(s['readout'])}")
+    if s["legs"]:
+        m = np.median(np.array(s["legs"]), axis=0)
+        print(f"  legs (median): key -> server got it {m[0]:.0f} ms; -> frame handed to viser {m[1]:.0f} ms; "
+              f"-> src set in the page {m[2]:.0f} ms; -> decoded {m[3]:.0f} ms; -> painted {m[4]:.0f} ms")
+    elif not s["matched"]:
+        print("  (inputs and server changes did not pair up: no legs)")
+    print(f"  page long tasks during the presses: {s['long'][0]}, {s['long'][1]:.0f} ms in all")
 
 
-def legs(inputs: np.ndarray, received: np.ndarray, queued: np.ndarray, shown: np.ndarray) -> None:
-    """Where a step's latency goes (epoch ms; the page and the server share the machine's clock)."""
-    a, b, c = [], [], []
-    for t in inputs:
-        r = first_after(received, t)
-        q = first_after(queued, r) if r is not None else None
-        f = first_after(shown, q) if q is not None else None
-        if f is not None:
-            a.append(r - t), b.append(q - r), c.append(f - q)
-    if a:
-        print(f"  legs (median): key press -> server receives {np.median(a):.0f} ms; -> frame queued "
-              f"{np.median(b):.0f} ms; -> frame shown {np.median(c):.0f} ms")
-
-
-def summary(name: str, lat: np.ndarray, sizes: list[float]) -> str:
-    if lat.size == 0:
-        return f"{name}: no frames"
-    kb = np.array([s for s in sizes if s > 0]) / 1000.0
-    return (f"{name}: {lat.size} inputs, latency median {np.median(lat):.0f} ms, p95 {np.percentile(lat, 95):.0f} ms, "
-            f"max {lat.max():.0f} ms; {len(sizes)} frames, {kb.mean() if kb.size else float('nan'):.1f} KB per update "
-            f"(max {kb.max() if kb.size else float('nan'):.1f} KB)")
+def report_held(p: Page, args) -> None:
+    h = held_key(p, args.presses * 2, args.repeat_ms)
+    kb = np.array(h["kb"]) if h["kb"] else np.zeros(1)
+    print(f"  held key (a repeat every {args.repeat_ms:g} ms): input -> a frame showing it painted: "
+          f"{stats(h['lat'])}; {h['frames']} frames for {h['inputs']} inputs, {kb.mean():.1f} KB per update "
+          f"(max {kb.max():.1f}); long tasks {h['long'][0]}, {h['long'][1]:.0f} ms")
+    if h["changes"] != h["inputs"]:
+        print(f"  ({h['inputs']} key events, {h['changes']} changes reached the server)")
 
 
 def main() -> None:
@@ -141,12 +343,13 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=75_000)
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
-    parser.add_argument("--presses", type=int, default=30)
-    parser.add_argument("--drag-ms", type=float, default=40.0)
-    parser.add_argument("--viewport", default="1366x768")
-    parser.add_argument("--no-3d", action="store_true", help="diagnosis: leave the 3D gizmo still")
-    parser.add_argument("--no-mi", action="store_true", help="diagnosis: no MI readout updates")
-    parser.add_argument("--cloud-step", type=int, default=1, help="diagnosis: show every k-th point in the 3D view")
+    parser.add_argument("--presses", type=int, default=20)
+    parser.add_argument("--clicks", type=int, default=8)
+    parser.add_argument("--repeat-ms", type=float, default=33.0, help="key auto-repeat interval of a held key")
+    parser.add_argument("--viewports", default="1366x768,1920x1080")
+    parser.add_argument("--delays", default="0,40", help="ms each way through delay_proxy.py; 0 = direct")
+    parser.add_argument("--parts", default="steps,held,switch", help="which of steps,held,switch to run")
+    parser.add_argument("--hide-3d", action="store_true", help="diagnosis: no 3D view in the page (display: none)")
     args = parser.parse_args()
 
     from playwright.sync_api import sync_playwright
@@ -155,110 +358,29 @@ def main() -> None:
 
     t0 = time.perf_counter()
     scene_set = build_scene_set(args.scenes, args.points, args.width, args.height)
-    app = build_app(scene_set, port=free_port(), out_dir=scene_set.root / "results")
+    port = free_port()
+    app = build_app(scene_set, port=port, out_dir=scene_set.root / "results")
     print(f"{args.scenes} scenes of {args.width}x{args.height}, {args.points} points; app up in "
-          f"{time.perf_counter() - t0:.1f} s", flush=True)
-    vw, vh = (int(v) for v in args.viewport.split("x"))
-    server_lat = instrument(app)
-    if args.no_3d:
-        app.view3d.show_pose = lambda extrinsic: None
-    if args.cloud_step > 1:
-        app.view3d.cloud.points = app.view3d.cloud.points[:: args.cloud_step]
-        app.view3d.cloud.colors = app.view3d.cloud.colors[:: args.cloud_step]
-    if args.no_mi:
-        app.mi_worker.poke = lambda: None
+          f"{time.perf_counter() - t0:.1f} s; {threading.active_count()} threads", flush=True)
+    log = ServerLog(app)
+    proxies: dict[float, DelayProxy] = {}
     try:
-        app.overlay.point_size.value = 3
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": vw, "height": vh})
-            page.goto(app.url)
-            page.get_by_text("Use in optimisation").wait_for(timeout=60_000)
-            page.get_by_role("tab", name="Seed").click()
-            page.get_by_text("included scenes:").wait_for(timeout=60_000)
-            app.overlay_worker.wait_idle(30)
-            app.mi_worker.wait_idle(60)
-            time.sleep(1.0)
-            assert page.evaluate(OBSERVE), "MI readout element not found"
-            label = page.locator("label", has_text="yaw (°)").first.get_attribute("for")
-            thumb = page.locator(f"[id='{label}']").get_by_role("slider")
-            thumb.focus()
-
-            # steps: one press, then let everything settle
-            for i in range(args.presses):
-                page.keyboard.press("ArrowRight" if i % 2 == 0 else "ArrowLeft")
-                app.overlay_worker.wait_idle(10)
-                app.mi_worker.wait_idle(30)
-                time.sleep(0.4)
-            data = page.evaluate("() => [window.__inputs, window.__frames, window.__readouts]")
-            inputs, frames, readouts = data
-            print(summary("steps (one key press, then rest)", latencies(inputs, frames), [f[1] for f in frames]))
-            origin = page.evaluate("() => performance.timeOrigin")
-            legs(np.array(inputs) + origin, np.array(RECEIVED), np.array(QUEUED), np.array([f[0] for f in frames]) + origin)
-            rt = np.array(readouts)
-            rl = np.array([first_after(rt, t) - t for t in inputs if first_after(rt, t) is not None])
-            if rl.size:
-                print(f"  MI readout shown after a step: median {np.median(rl):.0f} ms, p95 {np.percentile(rl, 95):.0f} ms")
-
-            # drag: presses faster than frames
-            page.evaluate("() => { window.__inputs = []; window.__frames = []; window.__readouts = []; }")
-            for i in range(args.presses * 2):
-                page.keyboard.press("ArrowRight" if (i // 10) % 2 == 0 else "ArrowLeft")
-                time.sleep(args.drag_ms / 1000.0)
-            t_end = page.evaluate("() => performance.now()")
-            time.sleep(1.5)
-            inputs, frames, _ = page.evaluate("() => [window.__inputs, window.__frames, window.__readouts]")
-            during = [f for f in frames if f[0] <= t_end + 100]
-            print(summary(f"drag (a key press every {args.drag_ms:.0f} ms)", latencies(inputs, frames),
-                          [f[1] for f in during]))
-            rest = [f for f in frames if f[0] > t_end + 100]
-            if rest:
-                print(f"  at rest after the drag: {len(rest)} frame(s), last {rest[-1][1] / 1000:.1f} KB")
-            # the scene table: a click on a row selects its scene (overlay of that scene shown)
-            # viser's "WebGL in software mode" notice may lie over the tabs: close notices first
-            for close in page.locator(".mantine-Notification-root button").all():
-                close.click()
-            page.get_by_role("tab", name="Scenes").click()
-            page.get_by_role("cell", name="scene_000").first.wait_for(timeout=30_000)
-            rng = np.random.default_rng(0)
-            click_lat, selected_at = [], []
-            real_select = app.select_scene
-            app.select_scene = lambda i: (selected_at.append(time.time() * 1e3), real_select(i))[1]
-            origin = page.evaluate("() => performance.timeOrigin")
-            reached, queued = [], []
-            for k in rng.choice(args.scenes, size=min(10, args.scenes), replace=False):
-                name = f"scene_{int(k):03d}"
-                cell = page.locator("td", has_text=name).first
-                cell.scroll_into_view_if_needed()
-                app.overlay_worker.wait_idle(10)
-                page.evaluate("() => { window.__frames = []; }")
-                t_click = page.evaluate("() => performance.now()")
-                cell.dispatch_event("click")
-                deadline = time.monotonic() + 10
-                while time.monotonic() < deadline:
-                    frames = page.evaluate("() => window.__frames")
-                    if frames and app.state.snapshot().selected == int(k):
-                        click_lat.append(frames[0][0] - t_click)
-                        if selected_at:
-                            reached.append(selected_at[-1] - (origin + t_click))
-                            q = first_after(np.array(QUEUED), selected_at[-1])
-                            queued.append(np.nan if q is None else q - selected_at[-1])
-                        break
-                    time.sleep(0.01)
-            if click_lat:
-                cl = np.array(click_lat)
-                print(f"table row click -> that scene's overlay shown: median {np.median(cl):.0f} ms, max {cl.max():.0f} ms "
-                      f"({cl.size} clicks, {args.scenes} rows); the click reached the server after "
-                      f"{np.median(reached) if reached else float('nan'):.0f} ms, its frame was queued "
-                      f"{np.nanmedian(queued) if queued else float('nan'):.0f} ms after that (medians)")
-            srv = np.array(app.overlay_seconds[-50:]) * 1e3
-            print(f"  server render+encode per frame: median {np.median(srv):.0f} ms")
-            sl = np.array(server_lat) * 1e3
-            if sl.size:
-                print(f"  server side, change received -> its frame encoded and queued: median {np.median(sl):.0f} ms, "
-                      f"p95 {np.percentile(sl, 95):.0f} ms")
+            for viewport in args.viewports.split(","):
+                for delay in (float(d) for d in args.delays.split(",")):
+                    url = app.url
+                    if delay > 0:
+                        if delay not in proxies:
+                            proxies[delay] = DelayProxy(("127.0.0.1", port), delay)
+                        url = f"http://127.0.0.1:{proxies[delay].port}"
+                    run_one(browser, app, log, url, viewport, delay, args)
             browser.close()
+        srv = np.array(app.overlay_seconds[-100:]) * 1e3
+        print(f"\nserver render+encode per frame: median {np.median(srv):.0f} ms, p95 {np.percentile(srv, 95):.0f} ms")
     finally:
+        for proxy in proxies.values():
+            proxy.stop()
         app.stop()
     import resource
     print(f"peak memory of the app's process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")

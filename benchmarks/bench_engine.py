@@ -5,16 +5,25 @@
     python benchmarks/bench_engine.py --scaling           # + cost versus scene count (5..80)
     python benchmarks/bench_engine.py --cli               # + the whole `l2e-studio calibrate` process
     python benchmarks/bench_engine.py --realism           # the harder synthetic mode (synth --realism)
+    python benchmarks/bench_engine.py --runs 4 --cli --reference   # + side by side with the paper's
+                                                          # computation (reference_l2e.py): ratios
 
 The synthetic dataset (the paper's sensors: 1280x720 event map, ~75k lidar points per scan) is
 written once to ``benchmarks/out/synth<N>`` and reused. Seeds follow the paper's protocol: the
 true extrinsic's translation and rotation vector each perturbed uniformly by up to 0.1 m and
 0.1 rad per axis. A run passes when it lands within 0.1 deg and 1 cm of the truth.
+
+Absolute times depend on the machine (its CPU is printed first, with the load average, which
+should be near 0): published figures are the ratios to ``--reference``, measured in the same
+run on the same data: ``reference_l2e.py`` does the paper's computation the plain way (every point,
+every scene, each evaluation; SLSQP with numerical gradients), written from the paper's text.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import platform
 import resource
 import subprocess
 import sys
@@ -53,6 +62,17 @@ def perturbed_seed(truth: Extrinsic, rng: np.random.Generator) -> Extrinsic:
     return Extrinsic(truth.rotvec + rng.uniform(-0.1, 0.1, 3), truth.translation + rng.uniform(-0.1, 0.1, 3))
 
 
+def cpu_name() -> str:
+    """The CPU's model name (``lscpu``'s), the core count this process may use, the load average."""
+    name = platform.processor() or "unknown CPU"
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
+        name = next(l.split(":", 1)[1].strip() for l in out.splitlines() if l.startswith("Model name"))
+    except (OSError, subprocess.CalledProcessError, StopIteration):
+        pass
+    return f"{name}, {len(os.sched_getaffinity(0))} cores, load average {os.getloadavg()[0]:.1f}"
+
+
 def load(folder: Path):
     t = time.perf_counter()
     scene_set = load_scene_folder(folder, use_cache=False)
@@ -72,10 +92,13 @@ def main() -> None:
     ap.add_argument("--scaling", action="store_true")
     ap.add_argument("--cli", action="store_true")
     ap.add_argument("--realism", action="store_true", help="the harder synthetic mode")
+    ap.add_argument("--reference", action="store_true",
+                    help="also time the paper's computation (reference_l2e.py) on the same data and seed: ratios")
     ap.add_argument("--seed-level", help="DEG,M: seeds exactly this far off in a random direction "
                                          "(default: the paper's uniform 0.1 m / 0.1 rad per axis)")
     args = ap.parse_args()
 
+    print(f"CPU: {cpu_name()}")
     folder = dataset(args.scenes, args.realism)
     truth = read_truth(folder / "truth.yaml")
     scene_set, cold, warm = load(folder)
@@ -128,6 +151,7 @@ def main() -> None:
             res = calibrate(st, None, perturbed_seed(truth, np.random.default_rng(n)), settings)
             print(f"{n:6d} {st.n_points:8d} {1000 * ev:7.1f} {res.seconds:8.2f}", flush=True)
 
+    whole = None
     if args.cli:
         out = OUT / "cli_result.yaml"
         out.unlink(missing_ok=True)
@@ -140,6 +164,48 @@ def main() -> None:
         wall = time.perf_counter() - t
         peak = next((int(l.split(":")[1]) / 1024 for l in proc.stderr.splitlines() if "Maximum resident" in l), float("nan"))
         print(f"\nwhole `l2e-studio calibrate` process on {args.scenes} scenes: {wall:.2f} s, peak memory {peak:.0f} MB")
+        whole = wall
+
+    if args.reference:
+        side_by_side(folder, truth, stack, settings, rows, cold, whole)
+    print(f"CPU at the end: {cpu_name()}")
+
+
+def side_by_side(folder: Path, truth: Extrinsic, stack, settings, rows, our_load: float, our_whole: float | None) -> None:
+    """The paper's computation on the same scenes and the first run's seed; ours / its time as ratios."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import reference_l2e as ref
+
+    t = time.perf_counter()
+    scenes = ref.load(folder)
+    ref_load = time.perf_counter() - t
+    ref_eval = timed(lambda: ref.mi(truth.params, scenes), 2)
+    our_eval = timed(lambda: stack.mi(truth, per_scene=False))
+    seed = perturbed_seed(truth, np.random.default_rng(2023))  # the first run's seed
+    print(f"\nreference (the paper's computation, reference_l2e.py), {len(scenes.maps)} scenes, "
+          f"from run 0's seed: calibrating...", flush=True)
+    res = ref.calibrate(scenes, seed.params)
+    deg, m = Extrinsic.from_params(res.theta).error_to(truth)
+    t = time.perf_counter()
+    ours = calibrate(stack, None, seed, settings)
+    verdict = judge(stack, ours, settings)
+    our_run = time.perf_counter() - t
+    print(f"  reference: load {ref_load:.2f} s; one MI evaluation {1000 * ref_eval:.0f} ms; calibration "
+          f"{res.seconds:.1f} s ({res.evaluations} evaluations) -> {deg:.3f} deg {1000 * m:.1f} mm from the truth")
+    odeg, om = ours.extrinsic.error_to(truth)
+    print(f"  ours, same seed: one MI evaluation {1000 * our_eval:.0f} ms; optimisation {ours.seconds:.2f} s "
+          f"({ours.evaluations} evaluations) -> {odeg:.3f} deg {1000 * om:.1f} mm; + verdict {our_run - ours.seconds:.2f} s")
+    print(f"  ratios (reference time / ours): one MI evaluation {ref_eval / our_eval:.0f}x; "
+          f"optimisation {res.seconds / ours.seconds:.0f}x; optimisation (ours with its verdict) "
+          f"{res.seconds / our_run:.0f}x")
+    ref_whole = ref_load + res.seconds
+    if our_whole is not None:
+        print(f"  whole process: reference load + optimise {ref_whole:.1f} s; ours `l2e-studio calibrate` "
+              f"(load, optimise, judge, write) {our_whole:.1f} s: {ref_whole / our_whole:.0f}x")
+    else:
+        ours_whole = our_load + our_run
+        print(f"  whole process: reference load + optimise {ref_whole:.1f} s; ours in this process (load from "
+              f"text, optimise, judge) {ours_whole:.1f} s: {ref_whole / ours_whole:.0f}x (--cli times the real command)")
 
 
 if __name__ == "__main__":

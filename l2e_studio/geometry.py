@@ -19,6 +19,26 @@ from .camera import CameraModel
 #: (x right, y down, z forward): the rotation part of an ideally mounted, forward-looking rig.
 LIDAR_TO_CAMERA_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
+#: cos(pitch) under which roll/pitch/yaw are at gimbal lock (scipy's own test is 1e-7 on the angle)
+GIMBAL_LOCK_COS = 1e-6
+
+
+def euler_xyz(rotation: Rotation, degrees: bool = False) -> np.ndarray:
+    """Roll, pitch, yaw with ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, also at gimbal lock.
+
+    At pitch = +-90 deg (every lidar-to-optical-camera rotation of a forward-looking rig) roll and
+    yaw turn about the same axis; scipy then sets yaw to 0 and warns at the user's terminal. This
+    does the same decomposition without the warning: yaw = 0 and the roll that, with that pitch,
+    gives the rotation (exact at the lock, within ``GIMBAL_LOCK_COS`` rad beside it).
+    """
+    R = rotation.as_matrix()
+    if np.hypot(R[0, 0], R[1, 0]) >= GIMBAL_LOCK_COS:
+        return rotation.as_euler("xyz", degrees=degrees)
+    pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    M = Rotation.from_euler("y", pitch).as_matrix().T @ R  # = Rx(roll) with yaw = 0
+    angles = np.array([np.arctan2(M[2, 1], M[1, 1]), pitch, 0.0])
+    return np.degrees(angles) if degrees else angles
+
 
 @dataclass(frozen=True)
 class Extrinsic:
@@ -88,8 +108,8 @@ class Extrinsic:
         return q if q[3] >= 0 else -q
 
     def rpy(self, degrees: bool = True) -> np.ndarray:
-        """Roll, pitch, yaw (ROS convention)."""
-        return Rotation.from_rotvec(self.rotvec).as_euler("xyz", degrees=degrees)
+        """Roll, pitch, yaw (ROS convention; at gimbal lock yaw = 0, see :func:`euler_xyz`)."""
+        return euler_xyz(Rotation.from_rotvec(self.rotvec), degrees)
 
     def inverse(self) -> "Extrinsic":
         """``T_lidar_cam``."""

@@ -290,3 +290,57 @@ def test_two_tabs_share_state_and_a_closed_tab_loses_nothing(browser, context, a
             if not p.is_closed():
                 p.close()
         other.close()
+
+
+def painted_overlay(page) -> list:
+    """(a digest of the overlay's pixels as the page decoded them, its JPEG's SHA-256): the image
+    drawn through a canvas, so it is what the browser shows, not only which blob the tag names."""
+    return page.evaluate(
+        """async () => {
+            for (let attempt = 0; ; attempt++) {
+                const img = document.querySelector("img[src^='blob:']");
+                try {
+                    const buf = await (await fetch(img.src)).arrayBuffer();
+                    await img.decode();
+                    const c = document.createElement('canvas');
+                    c.width = img.naturalWidth; c.height = img.naturalHeight;
+                    const g = c.getContext('2d');
+                    g.drawImage(img, 0, 0);
+                    const px = g.getImageData(0, 0, c.width, c.height).data;
+                    const hex = async (b) => Array.from(new Uint8Array(await crypto.subtle.digest("SHA-256", b)))
+                        .map(x => x.toString(16).padStart(2, "0")).join("");
+                    return [await hex(px), await hex(buf)];
+                } catch (err) {  // a new frame replaced this one meanwhile
+                    if (attempt >= 20) throw err;
+                    await new Promise(r => setTimeout(r, 50));
+                }
+            }
+        }"""
+    )
+
+
+def test_one_key_press_paints_the_new_overlay_then_the_frame_at_rest(page, app):
+    """One arrow key on the focused yaw slider: the page paints a different overlay, and it
+    ends on the server's frame at rest for the new extrinsic (no timing asserted)."""
+    import hashlib
+
+    open_tab(page, "Seed")
+    page.get_by_text("included scenes:").wait_for()
+    sent = []  # (state version, at rest, SHA-256 of the JPEG) of every frame the server sends
+    render = app.overlay.render
+    app.overlay.render = lambda snap, rest=True: (render(snap, rest),
+                                                  sent.append((snap.version, rest, hashlib.sha256(app.overlay.image._data).hexdigest())))[0]
+    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the first frame at rest")
+    pixels0, jpeg0 = painted_overlay(page)
+    version0 = app.state.snapshot().version
+
+    slider_root(page, "yaw (°)").get_by_role("slider").focus()
+    page.keyboard.press("ArrowRight")
+    wait_for(lambda: app.state.snapshot().version > version0, what="the key press on the server")
+    version = app.state.snapshot().version
+    wait_for(lambda: any(v == version and rest for v, rest, _ in sent), what="the frame at rest of the new extrinsic")
+    at_rest = next(h for v, rest, h in sent if v == version and rest)
+    wait_for(lambda: painted_overlay(page)[1] == at_rest, what="the page to show the frame at rest")
+    pixels, jpeg = painted_overlay(page)
+    assert jpeg != jpeg0 and pixels != pixels0  # another image, decoded to other pixels
+    assert any(v == version and not rest for v, rest, _ in sent)  # a quick preview came first

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from app_fixtures import free_port, write_small_scenes
+from app_fixtures import free_port, wait_for, write_small_scenes
 from l2e_studio.app.panels.view3d import camera_pose, extrinsic_from_pose
 from l2e_studio.app.pose import sliders_from_extrinsic
 from l2e_studio.calibrate import CalibrationSettings
@@ -84,6 +84,9 @@ def test_scene_switch_changes_cloud_overlay_and_readout(app):
     app.select_scene(1)
     idle(app)
     assert app.state.snapshot().selected == 1
+    # the cloud follows the overlay's frame at rest (drawing it must not hold up the new overlay)
+    wait_for(lambda: app.view3d.shown_scene == 1, what="the 3D cloud of scene_001")
+    assert app.overlay.rest_frame
     assert not np.array_equal(np.array(app.view3d.cloud.points), cloud0)
     assert not np.array_equal(app.overlay.image.image, image0)
     assert "scene_001" in app.overlay.caption.content and "scene_001" in app.extrinsic.readout.content

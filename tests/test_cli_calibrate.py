@@ -69,6 +69,24 @@ def test_seed_override_and_single_stage(small_synth_dir, tmp_path):
                                          "accumulation": None}
 
 
+def test_a_seed_at_gimbal_lock_prints_no_warning_and_the_correction(small_synth_dir, tmp_path):
+    """An ideally mounted rig's seed (lidar x forward -> optical z) sits at pitch = -90 deg."""
+    from l2e_studio.geometry import LIDAR_TO_CAMERA_AXES
+
+    truth = read_truth(small_synth_dir / "truth.yaml")
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = LIDAR_TO_CAMERA_AXES, truth.translation
+    seed = tmp_path / "seed.yaml"
+    seed.write_text(yaml.safe_dump({"T_cam_lidar": T.tolist()}))
+    out = tmp_path / "r.yaml"
+    proc = run_cli("calibrate", "--scenes", small_synth_dir, "--seed", seed, "--out", out, "--single-stage")
+    assert proc.returncode == 0, proc.stderr
+    assert "Gimbal lock" not in proc.stderr + proc.stdout and "Warning" not in proc.stderr, proc.stderr
+    assert "rotation correction to the seed" in " ".join(proc.stdout.split())  # rich wraps the caption
+    data = yaml.safe_load(out.read_text())
+    assert np.allclose(data["seed"]["rpy_deg"][1], -90.0)  # the file keeps the absolute angles, exact
+
+
 def test_missing_folder(tmp_path):
     proc = run_cli("calibrate", "--scenes", tmp_path / "nope", "--out", tmp_path / "r.yaml")
     assert_one_line_error(proc, str(tmp_path / "nope"), "does not exist")

@@ -6,7 +6,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
-from l2e_studio.geometry import Extrinsic, left_jacobian, project_points, project_with_jacobian
+from l2e_studio.geometry import (LIDAR_TO_CAMERA_AXES, Extrinsic, euler_xyz, left_jacobian, project_points,
+                                 project_with_jacobian)
 
 K = np.array([[1045.0, 0.0, 641.3], [0.0, 1043.0, 359.2], [0.0, 0.0, 1.0]])
 RNG = np.random.default_rng(7)
@@ -38,6 +39,28 @@ def test_rpy_is_the_ros_convention():
     Ry = np.array([[np.cos(r(pitch)), 0, np.sin(r(pitch))], [0, 1, 0], [-np.sin(r(pitch)), 0, np.cos(r(pitch))]])
     Rz = np.array([[np.cos(r(yaw)), -np.sin(r(yaw)), 0], [np.sin(r(yaw)), np.cos(r(yaw)), 0], [0, 0, 1]])
     assert np.allclose(ext.R, Rz @ Ry @ Rx)
+
+
+@pytest.mark.parametrize("off_lock_deg", [0.0, 1e-7, 2e-5, 0.05])
+@pytest.mark.parametrize("lock_deg", [-90.0, 90.0])
+def test_rpy_at_and_beside_gimbal_lock_is_exact_and_silent(off_lock_deg, lock_deg):
+    """A forward-looking rig's T_cam_lidar sits at pitch = -90 deg: no warning, and the angles
+    still give the rotation back (scipy sets yaw = 0 there and warns at the user's terminal)."""
+    import warnings
+
+    rotations = [Rotation.from_matrix(LIDAR_TO_CAMERA_AXES)] if lock_deg < 0 and off_lock_deg == 0 else []
+    rotations += [Rotation.from_euler("xyz", [roll, lock_deg - np.sign(lock_deg) * off_lock_deg, yaw], degrees=True)
+                  for roll, yaw in ((0.0, 0.0), (37.0, -12.0), (-150.0, 100.0))]
+    for rot in rotations:
+        ext = Extrinsic(rot.as_rotvec(), np.zeros(3))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # any warning fails the test
+            rpy = ext.rpy()
+        assert abs(rpy[1] - lock_deg) < 0.1
+        np.testing.assert_allclose(Extrinsic.from_rpy(rpy, np.zeros(3)).R, ext.R, atol=2e-6)
+    # away from the lock: exactly scipy's answer
+    rot = Rotation.from_euler("xyz", [10.0, -20.0, 30.0], degrees=True)
+    np.testing.assert_array_equal(euler_xyz(rot, degrees=True), rot.as_euler("xyz", degrees=True))
 
 
 def test_transform_maps_lidar_points_into_the_camera_frame():

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
+from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, euler_xyz
 
 SLIDER_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
 
@@ -39,7 +39,7 @@ def sliders_from_extrinsic(
     _, d_optical = reference.delta_to(extrinsic)
     d_body = LIDAR_TO_CAMERA_AXES.T @ d_optical
     rot = Rotation.from_rotvec(d_body)
-    a = rot.as_euler("xyz", degrees=True)
+    a = euler_xyz(rot, degrees=True)
     if near is not None:
         near_rpy = np.asarray(near, dtype=np.float64).reshape(6)[3:]
         b = np.array([a[0] + 180.0, 180.0 - a[1], a[2] + 180.0])  # the same rotation

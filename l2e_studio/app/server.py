@@ -47,7 +47,9 @@ from .workers import LatestWorker, Settle
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
-OVERLAY_REST_S = 0.3  # s without a change before the frame at rest replaces the preview
+#: s without a change before the frame at rest replaces the preview (key auto-repeat and drags
+#: send a change every 16-50 ms; a person nudging pauses longer)
+OVERLAY_REST_S = 0.25
 #: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
@@ -163,7 +165,6 @@ class App:
         with self.ui_lock:
             self.scenes.show_selection()
             self.event_maps.show()
-        self.scene_3d_worker.poke()  # the 3D cloud (~600 KB to draw) follows the overlay's frame
         self.recording_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
@@ -297,9 +298,16 @@ class App:
         t0 = time.perf_counter()
         snap = self.state.snapshot()
         rest, self._want_rest = self._want_rest, False
-        self.overlay.render(snap, rest=rest)
-        if not rest:
-            self.overlay_settle.poke()
+        try:
+            self.overlay.render(snap, rest=rest)
+        finally:
+            if not rest:
+                self.overlay_settle.poke()
+            else:
+                # the 3D cloud of a newly selected scene (~600 KB) follows the frame at rest: drawing
+                # it costs a GPU-less page 100+ ms on its main thread, which would hold up the paint
+                # of the new overlay
+                self.scene_3d_worker.poke()
         self.overlay_seconds.append(time.perf_counter() - t0)
         del self.overlay_seconds[:-200]
 

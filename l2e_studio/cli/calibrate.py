@@ -199,11 +199,17 @@ def _summary(result, seed):
         table.add_row(name, f"{a:.4f}", f"{b:.4f}", f"{b - a:+.4f}")
     table.add_row("[b]all scenes[/]", f"[b]{result.score_seed:.4f}[/]", f"[b]{result.score_result:.4f}[/]",
                   f"[b]{result.score_result - result.score_seed:+.4f}[/]", end_section=True)
+    from ..app.pose import sliders_from_extrinsic
+
     ext = result.extrinsic
     dr, dt = seed.error_to(ext)
+    # the rotation as a correction to the seed (absolute roll/pitch/yaw of a lidar-camera rig sit
+    # at gimbal lock, where a small correction reads as a large change; the result file has them)
+    correction = sliders_from_extrinsic(ext, seed)[3:]
     table.caption = (
         f"t = [{', '.join(f'{v:.4f}' for v in ext.translation)}] m   "
-        f"rpy = [{', '.join(f'{v:.3f}' for v in ext.rpy())}] deg   "
+        f"rotation correction to the seed (roll, pitch, yaw as the app's Seed sliders) = "
+        f"[{', '.join(f'{v:+.3f}' for v in correction)}] deg   "
         f"moved {dr:.3f} deg / {100 * dt:.2f} cm from the seed"
         + ("   (cancelled)" if result.cancelled else "")
     )

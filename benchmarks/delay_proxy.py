@@ -1,0 +1,115 @@
+"""A local TCP proxy that delays every chunk by a fixed time in each direction (a slow tunnel).
+
+What an SSH tunnel to a far workstation adds: each byte arrives ``delay`` later, in order,
+in both directions (round trip = 2 x delay), with no limit on bandwidth. It works on bytes,
+so it carries the app's HTTP and its websocket alike.
+
+Run: ``python benchmarks/delay_proxy.py --target 127.0.0.1:8080 --port 8090 --delay-ms 40``
+(then open http://127.0.0.1:8090). :func:`start_in_thread` runs one inside a benchmark.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import threading
+import time
+
+
+async def _pipe(reader: asyncio.StreamReader, writer: asyncio.StreamWriter, delay: float) -> None:
+    """Copy ``reader`` to ``writer``, each chunk written ``delay`` s after it was read (order kept)."""
+    queue: asyncio.Queue = asyncio.Queue()
+
+    async def read() -> None:
+        try:
+            while chunk := await reader.read(65536):
+                queue.put_nowait((time.monotonic() + delay, chunk))
+        except (ConnectionError, OSError):
+            pass
+        queue.put_nowait((time.monotonic() + delay, b""))
+
+    async def write() -> None:
+        while True:
+            due, chunk = await queue.get()
+            wait = due - time.monotonic()
+            if wait > 0:
+                await asyncio.sleep(wait)
+            if not chunk:
+                break
+            writer.write(chunk)
+            try:
+                await writer.drain()
+            except (ConnectionError, OSError):
+                break
+        try:
+            writer.close()
+        except Exception:
+            pass
+
+    await asyncio.gather(read(), write())
+
+
+async def _serve(port: int, target: tuple[str, int], delay: float) -> asyncio.AbstractServer:
+    async def handle(client_r: asyncio.StreamReader, client_w: asyncio.StreamWriter) -> None:
+        try:
+            server_r, server_w = await asyncio.open_connection(*target)
+        except OSError:
+            client_w.close()
+            return
+        await asyncio.gather(_pipe(client_r, server_w, delay), _pipe(server_r, client_w, delay))
+
+    return await asyncio.start_server(handle, "127.0.0.1", port)
+
+
+class DelayProxy:
+    """A running proxy (in a thread of its own): ``port`` to connect to, :meth:`stop` to end it."""
+
+    def __init__(self, target: tuple[str, int], delay_ms: float, port: int = 0) -> None:
+        self.delay = delay_ms / 1000.0
+        self._loop = asyncio.new_event_loop()
+        started = threading.Event()
+        self._server = None
+
+        def run() -> None:
+            asyncio.set_event_loop(self._loop)
+            self._server = self._loop.run_until_complete(_serve(port, target, self.delay))
+            started.set()
+            self._loop.run_forever()
+
+        self._thread = threading.Thread(target=run, name="delay-proxy", daemon=True)
+        self._thread.start()
+        if not started.wait(10):
+            raise RuntimeError("the delay proxy did not start")
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    def stop(self) -> None:
+        def close() -> None:
+            self._server.close()
+            self._loop.stop()
+
+        self._loop.call_soon_threadsafe(close)
+        self._thread.join(5)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--target", required=True, help="host:port of the app")
+    parser.add_argument("--port", type=int, default=8090, help="port to listen on (127.0.0.1)")
+    parser.add_argument("--delay-ms", type=float, default=40.0, help="delay each way")
+    args = parser.parse_args()
+    host, port = args.target.rsplit(":", 1)
+
+    async def forever() -> None:
+        server = await _serve(args.port, (host, int(port)), args.delay_ms / 1000.0)
+        print(f"127.0.0.1:{args.port} -> {args.target}, {args.delay_ms:g} ms each way", flush=True)
+        async with server:
+            await server.serve_forever()
+
+    try:
+        asyncio.run(forever())
+    except KeyboardInterrupt:
+        pass
+
+
+if __name__ == "__main__":
+    main()
