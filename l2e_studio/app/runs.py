@@ -151,8 +151,8 @@ class Runner:
 
     def _score_best(self, best: Extrinsic | None = None, evaluations: int | None = None) -> None:
         """Put the run's best point on the curve, scored like the readout (final smoothing,
-        every point of the included scenes): one scale for every stage, whatever each stage's
-        own smoothing (a coarse stage's score is larger, and falls at the next stage's start)."""
+        every point of the included scenes): one scale for every stage and start (each stage's
+        own objective scores the same point differently: its smoothing, map scale and points)."""
         run = self.app.state.snapshot().run
         best = best if best is not None else run.best
         if best is None or best is self._scored_best:
