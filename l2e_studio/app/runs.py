@@ -89,8 +89,13 @@ class Runner:
         self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
         self._score_best()  # the curve starts at the seed, on the readout's scale
 
+        stage = [-1]
+
         def on_progress(p: Progress) -> None:
             app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
+            if p.stage != stage[0]:  # every stage (and start) begins with a point on the curve
+                stage[0] = p.stage
+                self._score_best(p.best, p.evaluations)
 
         def work() -> None:
             try:
