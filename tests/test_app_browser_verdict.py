@@ -103,7 +103,7 @@ def test_trusted_rotation_result_tab_before_after_exports_and_one_number(page, a
     assert np.allclose(scores.accepted.extrinsic.translation, r.seed.translation)
     assert r.seed.error_to(r.extrinsic)[1] > 0.005  # the optimiser moved the translation
     handed = score_num(scores.accepted.score)
-    page.get_by_text(f"After Accept: the checked rotation with the seed's translation").first.wait_for()
+    page.get_by_text("After Accept: the checked rotation with the seed's translation").first.wait_for()
     assert handed in page.get_by_text("After Accept: the checked").first.inner_text()  # Optimise tab
     page.locator(".uplot canvas").first.wait_for()
     shot(page, "optimise_finished")
