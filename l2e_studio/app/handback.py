@@ -64,13 +64,15 @@ def result_scores(snap: Any, scene_names: list[str], readout: MiReadout) -> Resu
         return readout.read(ext, mask).total
 
     accepted_ext, file_ext = snap.accepted, snap.handed_back
-    at_accepted = readout.read(accepted_ext, [True] * len(scene_names))
+    at_accepted = readout.read(accepted_ext, mask)  # pooled over the run's scenes, and every scene's own
     file_what = what_is_handed_back(snap.verdict, snap.judging_cancelled, bool(r.cancelled))
-    accepted_what = file_what if accepted_ext is file_ext else "the optimiser's answer (not trusted: your call)"
+    accepted = Answer(file_what if accepted_ext is file_ext else "the optimiser's answer (not trusted: your call)",
+                      accepted_ext, at_accepted.total)
     return ResultScores(
         seed=Answer("the run's seed", r.seed, score(r.seed)),
-        optimiser=Answer("the optimiser's own answer", r.extrinsic, score(r.extrinsic)),
-        accepted=Answer(accepted_what, accepted_ext, score(accepted_ext)),
-        file=Answer(file_what, file_ext, score(file_ext)),
+        optimiser=Answer("the optimiser's own answer", r.extrinsic,
+                         accepted.score if r.extrinsic is accepted_ext else score(r.extrinsic)),
+        accepted=accepted,
+        file=accepted if file_ext is accepted_ext else Answer(file_what, file_ext, score(file_ext)),
         per_scene_accepted=np.asarray(at_accepted.per_scene, dtype=np.float64),
     )

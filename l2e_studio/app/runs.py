@@ -89,8 +89,13 @@ class Runner:
         self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
         self._score_best()  # the curve starts at the seed, on the readout's scale
 
+        stage = [-1]
+
         def on_progress(p: Progress) -> None:
             app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
+            if p.stage != stage[0]:  # every stage (and start) begins with a point on the curve
+                stage[0] = p.stage
+                self._score_best(p.best, p.evaluations)
 
         def work() -> None:
             try:
@@ -151,8 +156,8 @@ class Runner:
 
     def _score_best(self, best: Extrinsic | None = None, evaluations: int | None = None) -> None:
         """Put the run's best point on the curve, scored like the readout (final smoothing,
-        every point of the included scenes): one scale for every stage, whatever each stage's
-        own smoothing (a coarse stage's score is larger, and falls at the next stage's start)."""
+        every point of the included scenes): one scale for every stage and start (each stage's
+        own objective scores the same point differently: its smoothing, map scale and points)."""
         run = self.app.state.snapshot().run
         best = best if best is not None else run.best
         if best is None or best is self._scored_best:

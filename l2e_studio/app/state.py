@@ -239,9 +239,10 @@ class SessionState:
     def record_best_score(self, run_id: int, evaluations: int, score: float) -> bool:
         """Add a point of the best-so-far curve on the common scale; False if ``run_id`` is stale."""
         with self._lock:
-            if run_id != self.run.run_id or not np.isfinite(score):
-                return False
-            self.run = replace(self.run, best_curve=self.run.best_curve + ((int(evaluations), float(score)),))
+            curve = self.run.best_curve
+            if run_id != self.run.run_id or not np.isfinite(score) or (curve and evaluations < curve[-1][0]):
+                return False  # stale, or older than the last point (two threads add points)
+            self.run = replace(self.run, best_curve=curve + ((int(evaluations), float(score)),))
             self._bump()
             return True
 
