@@ -231,11 +231,9 @@ def solve(frames: list[TargetFrame], board: Board, start: Extrinsic, use_edges: 
     return Solution(ext, cov, sd[:3], np.degrees(sd[3:]), float(res.cost), int(res.nfev), str(res.message))
 
 
-def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
-    """The frame-clustered sandwich covariance of a correction ``(dt, dw)`` of ``ext`` (m, rad):
-    ``A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the sum over frames of the outer products of
-    their gradients ``J_f^T r_f``; small-sample factor ``k / (k - 6)`` for k frames. It takes the
-    frames' actual scatter, not the assumed noise, as the measure."""
+def linearised(ext: Extrinsic, frames, board, use_edges: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(J, r, groups)``: the weighted residuals at ``ext``, their Jacobian with respect to a
+    correction ``(dt, dw)`` (central differences) and each residual's frame number."""
     frames = [_thin(f) for f in frames]
     r0, groups = _stack(np.zeros(6), ext, frames, board, use_edges)
     J = np.empty((len(r0), 6))
@@ -243,6 +241,15 @@ def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) 
         x = np.zeros(6)
         x[k] = h
         J[:, k] = (_stack(x, ext, frames, board, use_edges)[0] - _stack(-x, ext, frames, board, use_edges)[0]) / (2 * h)
+    return J, r0, groups
+
+
+def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
+    """The frame-clustered sandwich covariance of a correction ``(dt, dw)`` of ``ext`` (m, rad):
+    ``A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the sum over frames of the outer products of
+    their gradients ``J_f^T r_f``; small-sample factor ``k / (k - 6)`` for k frames. It takes the
+    frames' actual scatter, not the assumed noise, as the measure."""
+    J, r0, groups = linearised(ext, frames, board, use_edges)
     A = J.T @ J
     B = np.zeros((6, 6))
     for g in np.unique(groups):
@@ -255,6 +262,24 @@ def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) 
     except np.linalg.LinAlgError:
         return np.full((6, 6), np.inf)
     return Ai @ B @ Ai * (k / max(k - 6, 1))
+
+
+def leave_one_out(ext: Extrinsic, frames, board, use_edges: bool = True) -> list[tuple[float, float]]:
+    """Per frame, (metres, degrees) the solution moves when that frame alone is left out: one
+    Gauss-Newton step from ``ext`` (the solution) without the frame's residuals."""
+    J, r0, groups = linearised(ext, frames, board, use_edges)
+    A, g = J.T @ J, J.T @ r0
+    out = []
+    for i in range(len(frames)):
+        m = groups == i
+        try:
+            step = -np.linalg.solve(A - J[m].T @ J[m], g - J[m].T @ r0[m])
+        except np.linalg.LinAlgError:
+            out.append((float("inf"), float("inf")))
+            continue
+        deg, dist = ext.error_to(ext.perturbed(step[:3], step[3:]))
+        out.append((dist, deg))
+    return out
 
 
 @dataclass(frozen=True)
