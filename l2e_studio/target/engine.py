@@ -17,6 +17,9 @@ detected and reported.
 
 from __future__ import annotations
 
+import hashlib
+import io
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -24,6 +27,8 @@ from typing import Callable, Collection, Sequence
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
+from ..cachedir import user_cache_dir
 from ..calibrate import CalibrationResult, CalibrationSettings, Progress
 from ..camera import CameraModel
 from ..errors import InputError
@@ -34,7 +39,7 @@ from .board import Board
 from .detect import Detection, detect_cached
 from .lidar import LidarBoard, crop_board, search_board
 from .solve import (EDGE_SIGMA_M, PLANE_SIGMA_M, Observability, Solution, TargetFrame, closed_form, frame_residuals,
-                    observability, residuals_at, solve)
+                    leave_one_out, observability, residuals_at, solve)
 
 OBJECTIVE = "board planes"  # CalibrationResult.objective of this method; score = -RMS point-to-plane distance (mm)
 MIN_FRAMES = 3
@@ -140,14 +145,31 @@ class TargetDetail:
 
 
 def scan_rings(scene: Scene) -> np.ndarray | None:
-    """The ring number of each of ``scene.points`` from its file's ring field, or None."""
-    if scene.lidar_path is None:
+    """The ring number of each of ``scene.points`` from its file's ring field, or None (cached
+    beside the parsed scans in the user's cache folder, keyed by the file's path, size and time)."""
+    path = scene.lidar_path
+    if path is None or not path.is_file():
         return None
+    st = path.stat()
+    key = hashlib.sha1(os.fsencode(path.resolve()) + f"|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
+    cached = user_cache_dir("rings") / f"{key}.npy"
     try:
-        scan = load_lidar(scene.lidar_path)
+        rings = np.load(cached)
+        return rings if rings.size == len(scene.points) else None
+    except (OSError, ValueError):
+        pass
+    try:
+        scan = load_lidar(path)
     except InputError:
         return None
-    return scan.ring if scan.ring is not None and len(scan.ring) == len(scene.points) else None
+    rings = scan.ring if scan.ring is not None and len(scan.ring) == len(scene.points) else None
+    buf = io.BytesIO()
+    np.save(buf, np.zeros(0, np.int32) if rings is None else rings.astype(np.int32))
+    try:
+        atomic_write_bytes(cached, buf.getvalue())
+    except OSError:
+        pass
+    return rings
 
 
 def detect_frames(scenes: Sequence[Scene], camera: CameraModel, board: Board, use_cache: bool = True,
@@ -322,12 +344,7 @@ def _leave_one_out(frames: list[TargetFrame], board: Board, ext: Extrinsic,
     """{name: (metres, degrees) the result moves when that frame alone is left out}."""
     if len(frames) <= MIN_FRAMES:
         return {}
-    out = {}
-    for i, f in enumerate(frames):
-        other = solve(frames[:i] + frames[i + 1:], board, ext, settings.use_edges, covariance=False).extrinsic
-        deg, m = ext.error_to(other)
-        out[f.name] = (m, deg)
-    return out
+    return {f.name: moved for f, moved in zip(frames, leave_one_out(ext, frames, board, settings.use_edges))}
 
 
 def _cancelled(cancel: threading.Event | None) -> bool:
