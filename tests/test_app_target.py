@@ -54,7 +54,7 @@ def test_board_fields_are_checked_as_typed():
 def test_marks_draw_board_points_and_corners():
     image = np.zeros((100, 160, 3), np.uint8)
     out = draw_board_marks(image, np.array([[40.0, 30.0], [60.0, 30.0]]), np.array([[100.0, 70.0]]), 3)
-    assert tuple(out[70, 100]) == BOARD_POINT_RGB
+    assert tuple(out[70, 100]) == BOARD_POINT_RGB and tuple(out[70, 103]) != BOARD_POINT_RGB
     ring = out[25:36, 35:46]
     assert ring[..., 0].max() > 150 and ring[..., 1].max() < 120  # the first corner red
     assert out[20:41, 50:71, 1].max() > 150  # the next green
@@ -106,7 +106,11 @@ def test_a_checkerboard_run_and_a_frame_left_out_by_a_click(app):
     deg, m = first.extrinsic.error_to(truth)
     assert m < 0.01 and deg < 0.5  # a calibration, not the seed (2 deg / 5 cm off)
     assert "checkerboard" in app.results.summary.content
-    assert "plane RMS" in app.target.table.content and "used" in app.target.status.content
+    assert "used" in app.target.status.content
+    rows = [r.split("|") for r in app.target.table.content.splitlines() if r.startswith("| ✓ |")]
+    assert len(rows) == 6 and all(float(r[6]) > 0 and float(r[7]) > 0 for r in rows)  # plane, edge RMS (mm)
+    verdict = app.state.snapshot().verdict
+    assert verdict is not None and f"Verdict: {verdict.summary()}" in app.results.summary.content
     assert sum(bool(v.used) for v in app.target.views.values()) >= 4
     # a click on the first cell of scene_002's row leaves it out (the page writes this pointer)
     app.scenes.pointer.value = "toggle:scene_002,1"

@@ -243,6 +243,7 @@ class App:
         self.overlay_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
+        self.target.detect_boards()
 
     # --- event maps ---------------------------------------------------------------------------
     def recording(self, index: int) -> EventStats | str | None:

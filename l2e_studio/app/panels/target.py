@@ -86,15 +86,17 @@ def draw_board_marks(image: np.ndarray, corners: np.ndarray | None, board_uv: np
     """``image`` (H, W, 3 uint8) with the board's lidar points (magenta discs) and the detected
     corners (green rings, the first corner red) drawn over it."""
     out = image.copy()
-    r = max(2, int(point_size))
+    r = max(1, int(point_size) - 1)
     if board_uv is not None:
         for u, v in np.rint(board_uv).astype(int):
-            cv2.circle(out, (int(u), int(v)), r, BOARD_POINT_RGB, -1, lineType=cv2.LINE_AA)
+            cv2.circle(out, (int(u), int(v)), r, BOARD_POINT_RGB, -1)
     if corners is not None and len(corners):
-        ring = max(3, int(round(image.shape[1] / 200)))
-        for i, (u, v) in enumerate(np.asarray(corners, float)):
+        c = np.asarray(corners, float)
+        step = float(np.median(np.linalg.norm(np.diff(c, axis=0), axis=1))) if len(c) > 1 else 10.0
+        ring = max(2.0, 0.3 * step)  # a third of the squares' size: neighbours' rings never touch
+        for i, (u, v) in enumerate(c):
             color = FIRST_CORNER_RGB if i == 0 else CORNER_RGB
-            cv2.circle(out, (int(round(u * 16)), int(round(v * 16))), ring * 16, color, 1, cv2.LINE_AA, shift=4)
+            cv2.circle(out, (int(round(u * 16)), int(round(v * 16))), int(round(ring * 16)), color, 1, cv2.LINE_AA, shift=4)
     return out
 
 
@@ -126,10 +128,22 @@ def frame_views_from_result(result) -> list[FrameView]:
     return out
 
 
+def short_detector(method: str) -> str:
+    """The detector's name as the table shows it: ``quad`` (findChessboardCorners, ``x2`` on the
+    image upscaled) or ``SB`` (findChessboardCornersSB)."""
+    m = method.replace(" + cornerSubPix", "").replace("findChessboardCornersSB", "SB")
+    return m.replace("findChessboardCorners", "quad").strip()
+
+
+TABLE_KEY = ("board: the detector that found it (quad, SB) or ✗ · px: the corners' reprojection RMS · pts: lidar board points · plane, edge: RMS (mm) of the board "
+             "points to the camera's board plane and of the edge points to its outline, at the last result · "
+             "click a row to show it, its ✓ to leave it out or take it back")
+
+
 def frames_table(views: list[FrameView], included: list[bool], names: list[str], selected: int) -> str:
     """Markdown: a row per frame (its first cell includes / leaves it out, as the scene table)."""
     by_name = {v.name: v for v in views}
-    rows = [f"| {TABLE_MARK} | frame | board | reproj. px | lidar pts | plane RMS mm | edge RMS mm | note |",
+    rows = [TABLE_KEY, "", f"| {TABLE_MARK} | frame | board | px | pts | plane | edge | note |",
             "|:-:|:--|:-:|--:|--:|--:|--:|:--|"]
     for i, name in enumerate(names):
         v = by_name.get(name)
@@ -138,9 +152,8 @@ def frames_table(views: list[FrameView], included: list[bool], names: list[str],
         if v is None:
             rows.append(f"| {mark} | {label} | … | | | | | not detected yet |")
             continue
-        board = ("✓ " + v.detector) if v.detected else "✗"
-        note = v.note or ("" if v.used is None else "used" if v.used else "")
-        note = note.replace("|", "/")
+        board = short_detector(v.detector) if v.detected else "✗"
+        note = v.note.replace("|", "/")
         rows.append(f"| {mark} | {label} | {board} | {num(v.reprojection_px, 2)} | {v.lidar_points or '—'} | "
                     f"{num(1000 * v.plane_rms_m, 1)} | {num(1000 * v.edge_rms_m, 1)} | {note} |")
     return "\n".join(rows)
@@ -184,14 +197,18 @@ class TargetPanel:
         self.status = gui.add_markdown("")
         self.table = gui.add_markdown(self._table())
         self.cloud = app.server.scene.add_point_cloud("/board_points", np.zeros((1, 3), np.float32),
-                                                      np.array([BOARD_POINT_RGB], np.uint8), point_size=0.07,
+                                                      np.array([BOARD_POINT_RGB], np.uint8), point_size=0.03,
                                                       point_shape="circle", visible=False)
         self.worker = LatestWorker("target-detect", self._detect_all)
         for handle in (self.squares, self.square, self.size):
             handle.on_update(lambda _: self.check())
-        self.detect.on_click(lambda _: self.worker.poke())
+        self.detect.on_click(lambda _: self.detect_boards())
         self.marks.on_update(lambda _: self._marks_changed())
-        if self.check() is not None:
+        self.check()
+
+    def detect_boards(self) -> None:
+        """Detect the board in every frame, in the background (nothing when the board is refused)."""
+        if not self.detect.disabled:
             self.worker.poke()
 
     # --- the board ------------------------------------------------------------------------
@@ -281,6 +298,7 @@ class TargetPanel:
         n_used = sum(bool(v.used) for v in self.views.values())
         self.status.content = f"Last run: **{n_used} of {len(self.views)} frames used**; residuals at its result."
         self.show_table()
+        self.app.target_changed()  # the marks follow the run's boards
 
     # --- views ----------------------------------------------------------------------------
     def _table(self) -> str:
@@ -306,7 +324,7 @@ class TargetPanel:
             pts = self.app.scene_set.scenes[index].points[v.board_indices]
             uv, front = project_points(extrinsic.transform(pts), self.app.camera)
             board_uv = uv[front]
-        return draw_board_marks(image, v.corners, board_uv, point_size + 1)
+        return draw_board_marks(image, v.corners, board_uv, point_size)
 
     def show_3d(self, index: int) -> None:
         """The 3D view's board points for frame ``index`` (hidden when there are none)."""
