@@ -54,6 +54,10 @@ class ReportInputs:
 
 
 def settings_from_result(result: dict) -> CalibrationSettings:
+    """The score climb's settings a result file records; a checkerboard result (``method:
+    target``) records its own solver, so the report scores it with the default climb settings."""
+    if result.get("method") == "target":
+        return CalibrationSettings()
     b = result.get("bounds") or {}
     o = result.get("optimiser") or {}
     kw = {}
@@ -364,7 +368,9 @@ def _target_section(target: dict) -> str:
     obs = target.get("observability") or {}
     if obs:
         cls = "ok" if obs.get("observed") else "warn"
-        add_obs = f"<div class='{cls}'>board orientations: {_e(obs.get('advice') or json.dumps(obs, default=str))}</div>"
+        words = obs.get("advice") or (f"every axis pinned (board normals spread {obs.get('normal_spread')} along "
+                                      f"their weakest direction {obs.get('weakest_direction')})")
+        add_obs = f"<div class='{cls}'>board orientations: {_e(words)}</div>"
     else:
         add_obs = ""
     sigma = target.get("sigma") or {}
