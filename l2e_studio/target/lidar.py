@@ -177,16 +177,18 @@ def crop_board(points: np.ndarray, rings: np.ndarray | None, detection: Detectio
         return LidarBoard(False, "no board in the image")
     p = np.asarray(points, dtype=np.float64)
     ring = ring_ids(p, rings)
+    centre, _ = predicted(detection, extrinsic)
+    near = np.flatnonzero(np.sum((p - centre) ** 2, axis=1) <= (0.5 * board.diagonal_m + 2 * margin_m) ** 2)
     to_board = detection.pose.inverse().compose(extrinsic)  # lidar -> board frame
-    q = to_board.transform(p)
+    q = to_board.transform(p[near])
     dist = float(np.linalg.norm(detection.pose.translation))
     tol = PLANE_TOL_M + PLANE_TOL_PER_M * dist + margin_m
     w, h = board.size_m[0] / 2.0 + margin_m, board.size_m[1] / 2.0 + margin_m
-    idx = np.flatnonzero((np.abs(q[:, 0]) <= w) & (np.abs(q[:, 1]) <= h) & (np.abs(q[:, 2]) <= tol))
+    idx = near[(np.abs(q[:, 0]) <= w) & (np.abs(q[:, 1]) <= h) & (np.abs(q[:, 2]) <= tol)]
     if len(idx) < MIN_POINTS:
         return _finish(p, ring, idx, "inside the board's outline")
     # the board's own plane among them (a hand or the stand may be near it): RANSAC, then refit
-    inl = _ransac_plane(p[idx], PLANE_TOL_M + PLANE_TOL_PER_M * dist, np.random.default_rng(0))
+    inl = _ransac_plane(p[idx], PLANE_TOL_M + PLANE_TOL_PER_M * dist, np.random.default_rng(0), iterations=100)
     if inl is not None:
         idx = idx[inl]
     return _finish(p, ring, idx, "inside the board's outline")
@@ -206,7 +208,7 @@ def _ransac_plane(p: np.ndarray, tol: float, rng: np.random.Generator, iteration
         return None
     normals, a = normals[ok] / norm[ok, None], a[ok]
     d = np.einsum("ij,ij->i", normals, a)
-    sample = p if n_pts <= 4000 else p[rng.choice(n_pts, 4000, replace=False)]
+    sample = p if n_pts <= 1500 else p[rng.choice(n_pts, 1500, replace=False)]
     counts = (np.abs(sample @ normals.T - d) <= tol).sum(axis=0)
     k = int(np.argmax(counts))
     mask = np.abs(p @ normals[k] - d[k]) <= tol
@@ -217,17 +219,22 @@ def _ransac_plane(p: np.ndarray, tol: float, rng: np.random.Generator, iteration
 
 
 def _patches(p: np.ndarray, link: float) -> list[np.ndarray]:
-    """Connected groups of points (single linkage at ``link`` metres), largest first."""
+    """Connected groups of points (single linkage at ``link`` metres), largest first. Linked on
+    voxels of ``link / 3`` (a scan line holds a point every few millimetres: linking every
+    pair within ``link`` would cost quadratically), then handed back to the points."""
+    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     if len(p) == 0:
         return []
-    pairs = cKDTree(p).query_pairs(link, output_type="ndarray")
-    from scipy.sparse import coo_matrix
-
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
+    voxel = link / 3.0
+    _, first, inverse = np.unique(np.floor(p / voxel).astype(np.int64), axis=0, return_index=True, return_inverse=True)
+    centres = p[first]
+    pairs = cKDTree(centres).query_pairs(link, output_type="ndarray")
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(centres), len(centres)))
     _, labels = connected_components(g, directed=False)
+    labels = labels[inverse.ravel()]
     groups = [np.flatnonzero(labels == k) for k in np.unique(labels)]
     return sorted(groups, key=len, reverse=True)
 
