@@ -121,3 +121,19 @@ def test_a_checkerboard_run_and_a_frame_left_out_by_a_click(app):
     assert not record.used and "left out by the user" in record.reason
     assert not np.allclose(second.extrinsic.params, first.extrinsic.params)
     assert "left out by the user" in app.target.table.content
+    # the same exports as a score climb: the result file with the board's section
+    import yaml
+
+    path, png = app.save_result()
+    doc = yaml.safe_load(path.read_text())
+    assert doc["method"] == "target" and png is not None and png.is_file()
+    frames = {f["name"]: f for f in doc["target"]["frames"]}
+    assert frames["scene_002"]["used"] is False and frames["scene_000"]["used"] is True
+
+
+def test_a_checkerboard_run_cancels(app):
+    app.start_run(app.run_settings(), "checkerboard")
+    assert app.cancel_run()
+    assert app.wait_run(120)
+    snap = app.state.snapshot()
+    assert snap.run.status == "cancelled" and snap.result.cancelled and snap.verdict is None

@@ -52,6 +52,7 @@ class Method:
 
 #: The methods the Optimise tab offers (:func:`targetless`, :func:`checkerboard`).
 METHOD_NAMES = ("score climb (targetless)", "checkerboard")
+CHECKERBOARD = METHOD_NAMES[1]
 
 
 def targetless(settings: CalibrationSettings) -> Method:

@@ -41,7 +41,7 @@ from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .rebuild import MapRebuilder, RebuildSummary, RecordingInfo
 from .state import SessionState
-from .runs import METHOD_NAMES, Runner, checkerboard, targetless
+from .runs import CHECKERBOARD, METHOD_NAMES, Runner, checkerboard, targetless
 from .workers import LatestWorker, Settle
 
 log = logging.getLogger(__name__)
@@ -361,7 +361,7 @@ class App:
         """Start ``method`` (one of ``METHOD_NAMES``: the score climb with ``settings``, or the
         checkerboard solve with the Target tab's board) on the included scenes from the current
         extrinsic (RuntimeError while event maps are being rebuilt, ValueError for a refused board)."""
-        if method == "checkerboard":
+        if method == CHECKERBOARD:
             board = self.target.board()
             return self.runner.start(checkerboard(self.scene_set.scenes, self.camera, board,
                                                   self.target.cached_detections(board)))

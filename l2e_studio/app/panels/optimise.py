@@ -13,7 +13,7 @@ import viser.uplot
 
 from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
-from ..runs import METHOD_NAMES
+from ..runs import CHECKERBOARD, METHOD_NAMES
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
@@ -113,7 +113,7 @@ class OptimisePanel:
             problems = [c.problem for c in self.checked() if c.problem]
         snap = self.app.state.snapshot()
         reason = start_blocker(sum(snap.included), problems, snap.run.active, self.app.rebuilding())
-        if not reason and self.calibration.value == "checkerboard":
+        if not reason and self.calibration.value == CHECKERBOARD:
             reason = self.app.target_problem()
             reason = f"{reason} (Target tab)" if reason else ""
         self.start.disabled = bool(reason)
