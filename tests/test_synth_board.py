@@ -21,7 +21,6 @@ from l2e_studio.synth import (
     make_target_scene,
     read_board_poses,
     read_truth,
-    write_target_dataset,
 )
 from l2e_studio.synth.board import pixel_rays, render_board
 from l2e_studio.synth.board_views import MODALITIES

@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 from .board import Board, pixel_rays
 from .board_views import IMAGE_MODALITIES, MODALITIES, render_view
-from .board_world import BoardScene, LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
+from .board_world import LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
 from .dataset import check_out_dir, perturb, scene_stem
 
 LENSES = ("radtan", "equidistant")

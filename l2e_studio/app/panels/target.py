@@ -27,6 +27,7 @@ from ..text import num
 from ..workers import LatestWorker
 from ...errors import InputError
 from ...geometry import Extrinsic, project_points
+from ...target import Board, detect_frames, find_target, load_target, scan_rings, search_board
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,7 @@ BOARD_POINT_RGB = (255, 0, 200)
 class BoardFields:
     """The board as typed: the engine's Board, or the problems of each field."""
 
-    board: object | None
+    board: Board | None
     problems: tuple[str, str, str]
 
 
@@ -52,8 +53,6 @@ def _numbers(text: str) -> list[float | None]:
 def check_board(squares: str, square_m: str, size_m: str) -> BoardFields:
     """The board from the three fields (``"10 x 7"``, ``"0.068"``, ``"0.8 x 0.6"`` or blank for
     the printed grid alone); each refused field gets a sentence saying why."""
-    from ...target import Board
-
     p_sq = p_side = p_size = ""
     sq = _numbers(squares)
     if len(sq) != 2 or any(v is None or v != int(v) or not 3 <= v <= 100 for v in sq):
@@ -161,17 +160,16 @@ def frames_table(views: list[FrameView], included: list[bool], names: list[str],
 
 class TargetPanel:
     """The Target tab. The App calls :meth:`annotate` (overlay), :meth:`show_3d` (3D view),
-    :meth:`result_shown` (a run ended) and :meth:`method` (the run to start)."""
+    :meth:`result_shown` (a run ended), :meth:`board` / :meth:`cached_detections` (the
+    checkerboard run to start) and :meth:`detect_boards` (once the workbench is up)."""
 
     def __init__(self, app: Workbench) -> None:
-        from ...target import find_target, load_target
-
         self.app = app
         gui = app.server.gui
         self._lock = threading.Lock()
         self.views: dict[str, FrameView] = {}
-        self.detections: dict[str, object] = {}  # name -> engine Detection, for the board in use
-        self._detected_for: object | None = None  # the board the detections are of
+        self.detections: dict[str, object] = {}  # name -> the engine's Detection, of ``_detected_for``
+        self._detected_for: Board | None = None
         path = find_target(app.scene_set.root)
         board, source = None, "No `target.yaml` in the scene folder: type the board below."
         if path is not None:
@@ -203,7 +201,7 @@ class TargetPanel:
         for handle in (self.squares, self.square, self.size):
             handle.on_update(lambda _: self.check())
         self.detect.on_click(lambda _: self.detect_boards())
-        self.marks.on_update(lambda _: self._marks_changed())
+        self.marks.on_update(lambda _: app.target_changed())
         self.check()
 
     def detect_boards(self) -> None:
@@ -241,8 +239,6 @@ class TargetPanel:
     def _detect_all(self) -> None:
         """Detect the board in every frame (cached), then search each detected frame's lidar board
         where the current extrinsic puts it."""
-        from ...target import detect_frames, scan_rings, search_board
-
         try:
             board = self.board()
         except ValueError:
@@ -335,9 +331,6 @@ class TargetPanel:
         self.cloud.points = self.app.scene_set.scenes[index].points[v.board_indices].astype(np.float32)
         self.cloud.colors = np.tile(np.array(BOARD_POINT_RGB, np.uint8), (len(v.board_indices), 1))
         self.cloud.visible = True
-
-    def _marks_changed(self) -> None:
-        self.app.target_changed()
 
     def stop(self) -> None:
         self.worker.stop()
