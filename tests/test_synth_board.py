@@ -170,4 +170,6 @@ def test_cli_refuses_garage_options_with_target(tmp_path: Path, capsys):
     assert cli_main(["synth", "--target", "checkerboard", "--realism", "--out", str(tmp_path / "x")]) == 2
     assert "--realism shapes the garage scenes" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+    assert cli_main(["synth", "--modality", "e2vid", "--out", str(tmp_path / "y")]) == 2
+    assert "--modality needs --target checkerboard" in capsys.readouterr().err
     assert CLI_MODALITIES == MODALITIES

@@ -41,11 +41,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     board.add_argument("--target", choices=("checkerboard",),
                        help="a board held up at a different pose in each scene (10 scenes, 10 x 7 squares of 68 mm), "
                             "seen by a 16-beam lidar; target.yaml and each board's true pose are written too")
-    board.add_argument("--modality", choices=MODALITIES, default="frame",
+    board.add_argument("--modality", choices=MODALITIES,
                        help="frame: a 1280x720 frame camera; e2vid: 346x260 images reconstructed from events (blur, "
                             "noise, low contrast); events: event map of a flashing board; events-moving: of a shaken "
                             "board (default: frame)")
-    board.add_argument("--lens", choices=("radtan", "equidistant"), default="radtan", help="lens distortion model")
+    board.add_argument("--lens", choices=("radtan", "equidistant"), help="lens distortion model (default: radtan)")
     board.add_argument("--range-noise-m", type=float, help="lidar range noise (sigma, default 0.015 m)")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder (old scene_* files are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
@@ -81,7 +81,7 @@ def target_config_from_args(args: argparse.Namespace):
         raise ValueError(f"--{given[0].replace('_', '-')} shapes the garage scenes, not --target sequences")
     if (args.width is None) != (args.height is None):
         raise ValueError("give both --width and --height with --target")
-    return target_config_with(TargetConfig(modality=args.modality, lens=args.lens), n_scenes=args.scenes,
+    return target_config_with(TargetConfig(), modality=args.modality, lens=args.lens, n_scenes=args.scenes,
                               width=args.width, height=args.height, seed=args.seed,
                               seed_error_deg=args.seed_error_deg, seed_error_m=args.seed_error_m,
                               range_noise_m=args.range_noise_m)
@@ -96,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
 
     err = Console(stderr=True)
     try:
+        board_only = [f"--{n.replace('_', '-')}" for n in ("modality", "lens", "range_noise_m") if getattr(args, n) is not None]
+        if board_only and not args.target:
+            raise ValueError(f"{board_only[0]} needs --target checkerboard")
         config = target_config_from_args(args) if args.target else config_from_args(args)
     except ValueError as exc:
         err.print(f"l2e-studio synth: error: {exc}", highlight=False)
