@@ -23,7 +23,11 @@ from .text import change, score_label, score_num
 from .workers import Ticker
 
 if TYPE_CHECKING:
+    from typing import Sequence
+
+    from ..camera import CameraModel
     from ..objective import SceneStack
+    from ..scenes import Scene
     from .server import App
 
 log = logging.getLogger(__name__)
@@ -46,6 +50,12 @@ class Method:
     solve: Callable[["SceneStack", Extrinsic, OnProgress, threading.Event], CalibrationResult]
     judge: Callable[["SceneStack", CalibrationResult, threading.Event, OnJudging], Verdict | None]
     judging: str = "Judging the result..."
+    label: str = ""  # the score's name in the progress line ("": the readout's)
+
+
+#: The methods the Optimise tab offers (:func:`targetless`, :func:`checkerboard`).
+METHOD_NAMES = ("score climb (targetless)", "checkerboard")
+CHECKERBOARD = METHOD_NAMES[1]
 
 
 def targetless(settings: CalibrationSettings) -> Method:
@@ -60,6 +70,31 @@ def targetless(settings: CalibrationSettings) -> Method:
 
     return Method("Optimisation", solve, judge_it,
                   "Judging the result: halves, a second start, a second score...")
+
+
+def checkerboard(scenes: "Sequence[Scene]", camera: "CameraModel", board, detections: list | None = None) -> Method:
+    """The target method: the board in every included frame's image and scan, all frames solved
+    together (:func:`l2e_studio.target.calibrate_target`), judged by
+    :func:`l2e_studio.target_verdict.judge_target`. Frames left out of the run (the scenes not
+    included) are still detected and listed, marked as left out by the user. ``detections``:
+    the Target tab's, when they are of this board (else the run detects, from the cache)."""
+    from ..target import calibrate_target
+
+    def solve(stack: "SceneStack", seed: Extrinsic, on_progress: OnProgress, cancel: threading.Event) -> CalibrationResult:
+        included = set(stack.names)
+        exclude = [sc.name for sc in scenes if sc.name not in included]
+        return calibrate_target(scenes, camera, seed, board, exclude=exclude, on_progress=on_progress, cancel=cancel,
+                                detections=detections)
+
+    def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event,
+                 on_judging: OnJudging) -> Verdict | None:
+        from ..target_verdict import judge_target
+
+        return judge_target(result)
+
+    return Method("Checkerboard calibration", solve, judge_it,
+                  "Judging the result: residuals against the sensors' noise, leave-one-frame-out, board orientations...",
+                  label="−board plane RMS (mm)")
 
 
 class Runner:
@@ -133,6 +168,10 @@ class Runner:
             log.exception("judging the result failed")
             return None, False
         return (None, True) if cancel.is_set() else (verdict, False)
+
+    def label(self) -> str:
+        """The score's name of the last run started ("" for the readout's)."""
+        return self._method.label if self._method is not None else ""
 
     def cancel(self) -> bool:
         """Ask the running calibration to stop (it returns its best point so far)."""

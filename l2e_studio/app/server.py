@@ -37,11 +37,12 @@ from .panels.qa import QAPanel
 from .panels.overlay_view import OverlayPanel
 from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
+from .panels.target import TargetPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .rebuild import MapRebuilder, RebuildSummary, RecordingInfo
 from .state import SessionState
-from .runs import Runner, targetless
+from .runs import CHECKERBOARD, METHOD_NAMES, Runner, checkerboard, targetless
 from .workers import LatestWorker, Settle
 
 log = logging.getLogger(__name__)
@@ -95,6 +96,8 @@ class App:
             self.pairs = PairsPanel(self)
         with tabs.add_tab("Optimise"):
             self.optimise = OptimisePanel(self)
+        with tabs.add_tab("Target"):
+            self.target = TargetPanel(self)
         with tabs.add_tab("Result"):
             self.results = ResultPanel(self)
         with tabs.add_tab("QA"):
@@ -164,6 +167,7 @@ class App:
         self.overlay_worker.poke()  # first: the overlay is what the user is waiting for
         with self.ui_lock:
             self.scenes.show_selection()
+            self.target.show_table()
             self.event_maps.show()
         self.recording_worker.poke()
         self.mi_worker.poke()
@@ -172,12 +176,33 @@ class App:
     def _show_scene_3d(self) -> None:
         self.overlay_worker.wait_idle(1.0)
         with self.ui_lock:
-            self.view3d.show_scene(self.state.snapshot().selected)
+            selected = self.state.snapshot().selected
+            self.view3d.show_scene(selected)
+            self.target.show_3d(selected)
 
     def inclusion_changed(self) -> None:
         self.scenes.show_selection()
+        self.target.show_table()
         self.optimise.show_start()
         self.mi_worker.poke()
+
+    def target_changed(self) -> None:
+        """The board, its detections or the marks' switch changed (Target tab)."""
+        if getattr(self, "target", None) is None:  # the Target tab is being built
+            return
+        self.optimise.show_start()
+        self.overlay_worker.poke()
+        self.scene_3d_worker.poke()
+
+    def annotate(self, index: int, extrinsic: Extrinsic, image: np.ndarray, point_size: int,
+                 box: tuple[float, float, float, float] | None = None) -> np.ndarray:
+        """The overlay of scene ``index`` (showing map window ``box``, None: all of it) with what
+        the Target tab marks on it (board corners, board points)."""
+        return self.target.annotate(index, extrinsic, image, point_size, box)
+
+    def target_problem(self) -> str:
+        """Why a checkerboard run cannot start ("" when it can)."""
+        return self.target.problem()
 
     def display_changed(self) -> None:
         """A display control moved (colour, size, opacity, contrast, map)."""
@@ -193,7 +218,7 @@ class App:
 
     def picking_changed(self, on: bool) -> None:
         """Picking pairs for PnP started or stopped: the 3D view looks through the camera and widens."""
-        with self._ui_lock:
+        with self.ui_lock:
             self.overlay.set_picking(on)
             self.view3d.set_picking(on)
 
@@ -229,6 +254,7 @@ class App:
         self.overlay_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
+        self.target.detect_boards()
 
     # --- event maps ---------------------------------------------------------------------------
     def recording(self, index: int) -> EventStats | str | None:
@@ -349,10 +375,19 @@ class App:
         """The optimiser settings the Optimise tab holds now (raises ValueError when refused)."""
         return self.optimise.settings()
 
-    def start_run(self, settings: CalibrationSettings) -> int:
-        """Start the score climb on the included scenes from the current extrinsic (RuntimeError
-        while event maps are being rebuilt)."""
+    def start_run(self, settings: CalibrationSettings, method: str = METHOD_NAMES[0]) -> int:
+        """Start ``method`` (one of ``METHOD_NAMES``: the score climb with ``settings``, or the
+        checkerboard solve with the Target tab's board) on the included scenes from the current
+        extrinsic (RuntimeError while event maps are being rebuilt, ValueError for a refused board)."""
+        if method == CHECKERBOARD:
+            board = self.target.board()
+            return self.runner.start(checkerboard(self.scene_set.scenes, self.camera, board,
+                                                  self.target.cached_detections(board)))
         return self.runner.start(targetless(settings))
+
+    def run_label(self) -> str:
+        """The name of the score the current (or last) run reports."""
+        return self.runner.label() or self.readout.label
 
     def cancel_run(self) -> bool:
         """Ask a running calibration to stop (it returns its best point so far)."""
@@ -375,6 +410,7 @@ class App:
             self.result_scores = None
         self.results.show(snap, self.held_out, self.result_scores)
         self.optimise.show_handed_back(self.result_scores)
+        self.target.result_shown(snap.result)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
@@ -447,6 +483,7 @@ class App:
         self.pose_settle.stop()
         self.table_settle.stop()
         self.rebuilder.wait(5.0)
+        self.target.stop()
         for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.scene_3d_worker,
                        self.recording_worker):
             worker.stop()

@@ -22,6 +22,7 @@ import viser.uplot
 from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
 from ...limits import MAX_ROTATION_BOUND_DEG, MAX_SIGMA_PX, MAX_TRANSLATION_BOUND_M
+from ..runs import CHECKERBOARD, METHOD_NAMES
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
@@ -43,6 +44,10 @@ class OptimisePanel:
         self.app = app
         gui = app.server.gui
         defaults = CalibrationSettings()
+        self.calibration = gui.add_dropdown("Method", METHOD_NAMES, initial_value=METHOD_NAMES[0],
+                                            hint="score climb: the paper's method, no target needed; checkerboard: "
+                                                 "the board of the Target tab in every frame (the settings below are "
+                                                 "the score climb's)")
         self.method = gui.add_dropdown("Optimiser", METHODS, initial_value=defaults.method,
                                        hint="SLSQP is fastest; L-BFGS-B and Powell are robust")
         # Text fields, checked on the server: a number box would clamp or drop what is typed.
@@ -92,7 +97,7 @@ class OptimisePanel:
         self.start.on_click(self._on_start)
         self.cancel.on_click(self._on_cancel)
         self.follow.on_update(lambda _: app.follow_changed(bool(self.follow.value)))
-        for handle in (self.t_bound, self.r_bound, self.sigma_in):
+        for handle in (self.t_bound, self.r_bound, self.sigma_in, self.calibration):
             handle.on_update(lambda _: self.check())
         self.check()
 
@@ -124,6 +129,9 @@ class OptimisePanel:
             problems = [c.problem for c in self.checked() if c.problem]
         snap = self.app.state.snapshot()
         reason = start_blocker(sum(snap.included), problems, snap.run.active, self.app.rebuilding())
+        if not reason and self.calibration.value == CHECKERBOARD:
+            reason = self.app.target_problem()
+            reason = f"{reason} (Target tab)" if reason else ""
         self.start.disabled = bool(reason)
         self.blocker.content = f"Start is disabled: {reason}." if reason and not snap.run.active else ""
         self.blocker.visible = bool(self.blocker.content)
@@ -143,7 +151,7 @@ class OptimisePanel:
 
     def _on_start(self, event) -> None:
         try:
-            self.app.start_run(self.settings())
+            self.app.start_run(self.settings(), self.calibration.value)
         except (RuntimeError, ValueError) as exc:
             self.app.notify(event.client, "Cannot start", str(exc), color="red")
 
@@ -158,7 +166,8 @@ class OptimisePanel:
 
     def show_running(self, running: bool) -> None:
         self.cancel.disabled = not running
-        for handle in (self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only, self.coarse):
+        for handle in (self.calibration, self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only,
+                       self.coarse):
             handle.disabled = running
         self.progress.animated = running
         self.show_start()
@@ -193,8 +202,8 @@ class OptimisePanel:
             self.progress.value = float(np.clip(100.0 * run.fraction, 0.0, 100.0))
             stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
             text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n{scored}  \n"
-                    f"<small>this stage's own objective (its smoothing, its points; not comparable across "
-                    f"stages): {score_num(run.mi)}, best {score_num(run.best_mi)}</small>")
+                    f"<small>this stage's own objective, {self.app.run_label()} (its smoothing, its points; "
+                    f"not comparable across stages): {score_num(run.mi)}, best {score_num(run.best_mi)}</small>")
         if run.error:
             text += f"  \n{run.error}"
         self.status.content = text

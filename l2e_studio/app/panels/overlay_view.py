@@ -204,9 +204,10 @@ class OverlayPanel:
         out_w = width or map_w
         # the frame is shown display_width px wide; at map resolution, as the panel would show the map
         screen = screen_width or (self.display_width if width else self.display_width * map_w / self.app.camera.width)
-        return render_view(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style,
-                           colors, box, out_w, screen, pixelated=window is not None and out_w > map_w,
-                           projection=projection)
+        image = render_view(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style,
+                            colors, box, out_w, screen, pixelated=window is not None and out_w > map_w,
+                            projection=projection)
+        return self.app.annotate(index, extrinsic, image, style.point_size, box)
 
     def render(self, snap: Snapshot, rest: bool = True) -> None:
         """Draw the overlay and send it within ``FRAME_BYTES``: at rest (``rest``) at the panel's

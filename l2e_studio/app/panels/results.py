@@ -102,7 +102,7 @@ class ResultPanel:
                     + f"**{label} {score_num(a.score)}** ({change(a.score, seed)} vs the "
                     f"run's seed {score_num(seed)}) · moved {deg:.3f}° / {100 * m:.2f} cm from the seed")
 
-        lines = [f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s · "
+        lines = [f"{state} · {'checkerboard' if r.method == 'target' else r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s · "
                  f"{len(r.scene_names)} scenes" + (f", {len(held_out)} held out" if held_out else ""),
                  verdict_text(v) if v is not None else not_judged_text(cancelled or snap.judging_cancelled)]
         if scores.accepted.extrinsic is scores.file.extrinsic:
