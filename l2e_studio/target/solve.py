@@ -3,14 +3,16 @@
 For every frame the camera gives the board's pose (its plane and outline in the camera frame)
 and the lidar gives points on the board and the board's edge points. ``T_cam_lidar`` must put
 
-* every lidar board point on the camera's board plane (point-to-plane distance), and
-* every edge point on the board's outline (in-plane distance to the rectangle's border): the
-  constraint along the plane that a plane alone lacks.
+* the lidar's board points on the camera's board plane: their mean distance (the board's
+  offset) and the lidar plane's tilt against the camera's, and
+* every edge point on the board's outline (in-plane distance to the rectangle's border, a
+  robust soft-L1 loss per point): the constraint along the plane that a plane alone lacks.
 
+Each board counts as one observation of each (see :func:`_stack` for the scales and why).
 :func:`closed_form` estimates the extrinsic from the planes alone (rotation aligning the lidar
 normals to the camera normals by SVD, translation by linear least squares on the plane
 offsets), so the seed only has to find the boards. :func:`solve` refines all frames together
-with a robust loss (``scipy.optimize.least_squares``, soft-L1). Its uncertainty is the
+(``scipy.optimize.least_squares``). Its uncertainty is the
 frame-clustered sandwich covariance (the residuals of one board share that board's camera-pose
 error, so they are not independent: the clustered form counts frames, not points), scaled by
 the residuals. :func:`observability` finds the direction the board normals leave unobserved.
@@ -28,8 +30,8 @@ from scipy.spatial.transform import Rotation
 from ..geometry import Extrinsic
 from .board import Board
 
-#: residual scales (m): lidar range noise on the plane, edge points on the outline (beam width,
-#: azimuth step and mixed returns make them looser)
+#: per-point scales (m): lidar range noise on the plane (the outlier test of a frame), edge
+#: points on the outline (beam width, azimuth step and mixed returns; the soft-L1 scale)
 PLANE_SIGMA_M, EDGE_SIGMA_M = 0.02, 0.03
 #: how far one whole board may sit off its plane / outline (m): the camera's pose error and the
 #: board's motion between the image and the scan (hand-held boards), shared by all its points
