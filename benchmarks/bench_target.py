@@ -81,10 +81,12 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--halves", type=int, default=10)
     ap.add_argument("--synthetic", type=int, default=3, help="synthetic sequences per modality (l2e-studio synth --target)")
+    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three)")
     args = ap.parse_args()
-    synthetic(args.synthetic)
+    if args.synthetic:
+        synthetic(args.synthetic)
     results = {}
-    for name in SETS:
+    for name in args.sets.split(","):
         folder = args.realdata / name
         ss = load_scene_folder(folder, seed_file=folder / "reference.yaml")
         ref, est, board = ss.seed, load_seed(folder / "lcecalib_estimate.yaml"), load_target(folder / "target.yaml")

@@ -238,3 +238,43 @@ def test_cli_bad_target_is_one_line(tmp_path, small_synth_dir, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(bad) in err[0] and "squares" in err[0]
     assert not (tmp_path / "r.yaml").exists()
+
+
+@pytest.fixture(scope="module")
+def synth_boards(tmp_path_factory) -> Path:
+    """A synthetic checkerboard sequence with a known answer (``l2e-studio synth --target checkerboard``)."""
+    from l2e_studio.cli import main
+
+    out = tmp_path_factory.mktemp("boards") / "seq"
+    assert main(["synth", "--target", "checkerboard", "--seed", "2", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_synthetic_sequence_end_to_end_with_exclusion_progress_and_cancel(synth_boards):
+    import threading
+
+    from l2e_studio.io.cameras import load_seed
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.target import calibrate_target, find_target
+    from l2e_studio.target_verdict import judge_target
+
+    ss = load_scene_folder(synth_boards)
+    truth, board = load_seed(synth_boards / "truth.yaml"), load_target(find_target(synth_boards))
+    seen = []
+    res = calibrate_target(ss.scenes, ss.camera, ss.seed, board, on_progress=seen.append)
+    deg, m = truth.error_to(res.extrinsic)
+    assert deg < 0.3 and m < 0.01, (deg, m)
+    assert ss.seed.error_to(truth)[0] > deg  # better than the seed it started from
+    assert {p.stage for p in seen} == {0, 1, 2} and seen[-1].fraction == 1.0
+    assert judge_target(res).status == "trusted"
+    # a frame left out by the user: reported, not used, and the answer changes
+    name = ss.scenes[0].name
+    res2 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, exclude={name})
+    rec = next(f for f in res2.target.frames if f.name == name)
+    assert not rec.used and rec.reason == "left out by the user" and rec.detected
+    assert res2.extrinsic.error_to(res.extrinsic)[1] > 1e-6
+    # cancelled before anything: the seed, marked cancelled
+    stop = threading.Event()
+    stop.set()
+    res3 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, cancel=stop)
+    assert res3.cancelled and res3.extrinsic is ss.seed and judge_target(res3).status == "not-trusted"

@@ -76,15 +76,15 @@ def _table(result):
 
     d = result.target
     table = Table(title="L2E checkerboard calibration", show_lines=False)
-    for col, j in (("frame", "left"), ("board", "left"), ("reproj px", "right"), ("lidar pts", "right"),
-                   ("plane mm", "right"), ("edge mm", "right"), ("leave-out moves", "right"), ("used", "left")):
+    for col, j in (("frame", "left"), ("corners", "left"), ("reproj px", "right"), ("lidar pts", "right"),
+                   ("plane mm", "right"), ("edge mm", "right"), ("left out: moves", "right"), ("used", "left")):
         table.add_column(col, justify=j)
     mm = lambda v: "—" if v != v else f"{1000 * v:.1f}"  # noqa: E731
     for f in d.frames:
-        table.add_row(f.name, f.detection.method.split(" ")[0] if f.detected else "not found",
+        table.add_row(f.name, _detector(f.detection.method) if f.detected else "not found",
                       "—" if not f.detected else f"{f.detection.reprojection_px:.2f}", str(f.lidar.n_points),
                       mm(f.plane_rms_m), mm(f.edge_rms_m),
-                      "—" if f.loo_m != f.loo_m else f"{1000 * f.loo_m:.1f} mm {f.loo_deg:.3f} deg",
+                      "—" if f.loo_m != f.loo_m else f"{1000 * f.loo_m:.1f} mm/{f.loo_deg:.2f}°",
                       "yes" if f.used else "no")
     ext = result.extrinsic
     dr, dt = result.seed.error_to(ext)
@@ -96,3 +96,10 @@ def _table(result):
         f"{', '.join(f'{v:.3f}' for v in s_d)} deg   board RMS {-result.score_seed:.1f} mm at the seed -> "
         f"{-result.score_result:.1f} mm" + ("   (cancelled)" if result.cancelled else ""))
     return table
+
+
+def _detector(method: str) -> str:
+    """A short name of the detector that found the corners (the result file has the full one)."""
+    if "SB" in method:
+        return "sector"
+    return "quad 2x" if "x2" in method else "quad"

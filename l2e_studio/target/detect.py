@@ -27,7 +27,6 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -216,7 +215,3 @@ def detect_cached(image: np.ndarray, board: Board, camera: CameraModel, name: st
     except OSError:
         pass  # best effort: an unwritable cache only costs time
     return det
-
-
-def cache_folder() -> Path:
-    return user_cache_dir("target")

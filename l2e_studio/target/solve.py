@@ -3,14 +3,16 @@
 For every frame the camera gives the board's pose (its plane and outline in the camera frame)
 and the lidar gives points on the board and the board's edge points. ``T_cam_lidar`` must put
 
-* every lidar board point on the camera's board plane (point-to-plane distance), and
-* every edge point on the board's outline (in-plane distance to the rectangle's border): the
-  constraint along the plane that a plane alone lacks.
+* the lidar's board points on the camera's board plane: their mean distance (the board's
+  offset) and the lidar plane's tilt against the camera's, and
+* every edge point on the board's outline (in-plane distance to the rectangle's border, a
+  robust soft-L1 loss per point): the constraint along the plane that a plane alone lacks.
 
+Each board counts as one observation of each (see :func:`_stack` for the scales and why).
 :func:`closed_form` estimates the extrinsic from the planes alone (rotation aligning the lidar
 normals to the camera normals by SVD, translation by linear least squares on the plane
 offsets), so the seed only has to find the boards. :func:`solve` refines all frames together
-with a robust loss (``scipy.optimize.least_squares``, soft-L1). Its uncertainty is the
+(``scipy.optimize.least_squares``). Its uncertainty is the
 frame-clustered sandwich covariance (the residuals of one board share that board's camera-pose
 error, so they are not independent: the clustered form counts frames, not points), scaled by
 the residuals. :func:`observability` finds the direction the board normals leave unobserved.
@@ -28,14 +30,12 @@ from scipy.spatial.transform import Rotation
 from ..geometry import Extrinsic
 from .board import Board
 
-#: residual scales (m): lidar range noise on the plane, edge points on the outline (beam width,
-#: azimuth step and mixed returns make them looser)
+#: per-point scales (m): lidar range noise on the plane (the outlier test of a frame), edge
+#: points on the outline (beam width, azimuth step and mixed returns; the soft-L1 scale)
 PLANE_SIGMA_M, EDGE_SIGMA_M = 0.02, 0.03
 #: how far one whole board may sit off its plane / outline (m): the camera's pose error and the
 #: board's motion between the image and the scan (hand-held boards), shared by all its points
 FRAME_PLANE_M, FRAME_EDGE_M, FRAME_TILT_DEG = 0.03, 0.01, 1.5
-#: board points per frame used by the solver
-MAX_POINTS = 150
 #: below this RMS spread of the board normals along a direction (sin of ~5 deg), that direction
 #: is not observed by the planes
 MIN_NORMAL_SPREAD = 0.09
@@ -66,6 +66,10 @@ class TargetFrame:
     def lidar_normal(self) -> np.ndarray:
         """The lidar points' plane normal (lidar frame, towards the sensor)."""
         return _plane(self.points)[0]
+
+    @cached_property
+    def centroid(self) -> np.ndarray:
+        return self.points.mean(axis=0)
 
     @cached_property
     def offset(self) -> float:
@@ -105,12 +109,14 @@ def residuals_at(ext: Extrinsic, frame: TargetFrame, board: Board) -> tuple[np.n
 
 def _residuals(R, t, frame: TargetFrame, board: Board) -> tuple[np.ndarray, np.ndarray]:
     plane = frame.points @ (R.T @ frame.normal) + (frame.normal @ t - frame.offset)
+    return plane, _edge_residuals(R, t, frame, board)
+
+
+def _edge_residuals(R, t, frame: TargetFrame, board: Board) -> np.ndarray:
     if len(frame.edges) == 0:
-        return plane, np.zeros(0)
-    cam = frame.edges @ R.T + t
-    Rb = frame.pose_R
-    q = (cam - frame.pose.translation) @ Rb  # board frame
-    return plane, outline_distance(q[:, :2], board)
+        return np.zeros(0)
+    q = (frame.edges @ R.T + t - frame.pose.translation) @ frame.pose_R  # board frame
+    return outline_distance(q[:, :2], board)
 
 
 def outline_distance(xy: np.ndarray, board: Board) -> np.ndarray:
@@ -176,15 +182,6 @@ def _soft_l1(u: np.ndarray) -> np.ndarray:
     return np.sign(u) * np.sqrt(2.0 * (np.sqrt(1.0 + u * u) - 1.0))
 
 
-def _thin(frame: TargetFrame) -> TargetFrame:
-    """At most ``MAX_POINTS`` board points (evenly strided): a frame's weight does not grow with
-    its point count (see :func:`_stack`), so more points only cost time."""
-    if len(frame.points) <= MAX_POINTS:
-        return frame
-    step = len(frame.points) / MAX_POINTS
-    return TargetFrame(frame.name, frame.pose, frame.points[(np.arange(MAX_POINTS) * step).astype(int)], frame.edges)
-
-
 def _stack(x, start: Extrinsic, frames, board, use_edges):
     """Weighted residuals and their frame numbers, three blocks per frame:
 
@@ -202,12 +199,13 @@ def _stack(x, start: Extrinsic, frames, board, use_edges):
     out, groups = [], []
     tilt = np.sin(np.radians(FRAME_TILT_DEG))
     for i, f in enumerate(frames):
-        plane, edge = _residuals(R, t, f, board)
         d = R @ f.lidar_normal - f.normal
         Rb = f.pose_R
-        out.append([float(np.mean(plane)) / FRAME_PLANE_M, (d @ Rb[:, 0]) / tilt, (d @ Rb[:, 1]) / tilt])
+        mean = f.normal @ (R @ f.centroid + t) - f.offset  # the mean point-to-plane distance
+        out.append([mean / FRAME_PLANE_M, (d @ Rb[:, 0]) / tilt, (d @ Rb[:, 1]) / tilt])
         groups.append(np.full(3, i))
-        if use_edges and len(edge):
+        if use_edges and len(f.edges):
+            edge = _edge_residuals(R, t, f, board)
             out.append(_soft_l1(edge / EDGE_SIGMA_M) * (EDGE_SIGMA_M / (FRAME_EDGE_M * np.sqrt(len(edge)))))
             groups.append(np.full(len(edge), i))
     return np.concatenate(out), np.concatenate(groups)
@@ -219,7 +217,6 @@ def solve(frames: list[TargetFrame], board: Board, start: Extrinsic, use_edges: 
     and edge residuals (:func:`_stack`)."""
     if not frames:
         raise ValueError("no frame to solve from")
-    frames = [_thin(f) for f in frames]
     fun = lambda x: _stack(x, start, frames, board, use_edges)[0]  # noqa: E731
     res = least_squares(fun, np.zeros(6), method="lm", x_scale=np.array([0.01] * 3 + [0.002] * 3),
                         xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400)
@@ -234,7 +231,6 @@ def solve(frames: list[TargetFrame], board: Board, start: Extrinsic, use_edges: 
 def linearised(ext: Extrinsic, frames, board, use_edges: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(J, r, groups)``: the weighted residuals at ``ext``, their Jacobian with respect to a
     correction ``(dt, dw)`` (central differences) and each residual's frame number."""
-    frames = [_thin(f) for f in frames]
     r0, groups = _stack(np.zeros(6), ext, frames, board, use_edges)
     J = np.empty((len(r0), 6))
     for k, h in enumerate([1e-6] * 3 + [1e-7] * 3):
