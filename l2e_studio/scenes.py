@@ -38,6 +38,8 @@ from .io.maps import (MAP_CLIP, MAP_SUFFIXES, MAX_CLIPPED_SHARE, RESCALED_CLIPPE
 MAP_DIRS = ("event", "events", "image", "images")
 LIDAR_DIRS = ("lidar", "pointcloud", "pointclouds")
 RIG_FILES = ("camera.yaml", "camera.yml", "config/config.json", "config.json")
+#: Bumped when the scan readers refuse more: a scan cached by an older version is read again.
+SCAN_CACHE_VERSION = 2
 CACHE_DIR = ".l2e_cache"  # where earlier versions cached scans (inside the data folder); no longer written
 
 
@@ -254,7 +256,8 @@ def _load_scan_cached(path: Path, cache_root: Path | None) -> tuple[np.ndarray, 
     cache_file = None
     if cache_root is not None:
         st = path.stat()
-        key = hashlib.sha1(os.fsencode(path.resolve()) + f"|{st.st_size}|{st.st_mtime_ns}".encode()).hexdigest()[:16]
+        key = hashlib.sha1(os.fsencode(path.resolve()) + f"|{st.st_size}|{st.st_mtime_ns}|{SCAN_CACHE_VERSION}".encode()
+                           ).hexdigest()[:16]
         cache_file = user_cache_dir("scans", folder_key(cache_root)) / f"{path.name}.{key}.npy"
         if cache_file.is_file():
             try:

@@ -40,8 +40,8 @@ class Target:
     load: Callable[[Path], object]
     check: Callable[[object], None] = lambda result: None
     lies: tuple[tuple[bytes, bytes], ...] = ()
-    truncations: int = 300  # at most this many cut points, evenly spread (every offset of a smaller file)
-    flips: int = 150
+    truncations: int = 200  # at most this many cut points, evenly spread (every offset of a smaller file)
+    flips: int = 100
 
 
 @dataclass

@@ -266,3 +266,52 @@ def test_a_zero_norm_quaternion_seed_is_refused(scenes: Path) -> None:
     run = run_cli("calibrate", "--scenes", scenes, "--seed", seed, "--quiet", "--out", scenes.parent / "r.yaml",
                   cwd=scenes.parent)
     assert_one_line_error(run, str(seed), "zero norm")
+
+
+# --- bags through extract ----------------------------------------------------------------------
+
+def _bag_far_points(path: Path) -> Path:
+    from bag_files import PTS, write_bag
+
+    far = PTS.copy()
+    far[::10, 0] = 1e30
+    write_bag(path, ros2=False, points=far)
+    return path
+
+
+def _bag_cut_in_a_record(path: Path) -> Path:
+    from bag_files import write_bag
+
+    write_bag(path, ros2=False)
+    path.write_bytes(path.read_bytes()[:-300])  # the index at the end loses its last records
+    return path
+
+
+def _bag_record_lies(path: Path) -> Path:
+    import struct
+
+    from bag_files import write_bag
+
+    write_bag(path, ros2=False)
+    data = bytearray(path.read_bytes())
+    start = len(b"#ROSBAG V2.0\n")
+    data[start:start + 4] = struct.pack("<I", 2**31)  # the first record's header claims 2 GB
+    path.write_bytes(bytes(data))
+    return path
+
+
+BAG_CASES = {
+    "bag-cloud-1e30": (_bag_far_points, ["farther than 10 km"]),
+    "bag-cut-in-a-record": (_bag_cut_in_a_record, ["truncated"]),
+    "bag-record-length-lies": (_bag_record_lies, ["2147483648-byte header"]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAG_CASES))
+def test_extract_refuses_garbage_bags(name: str, tmp_path: Path) -> None:
+    build, fragments = BAG_CASES[name]
+    bag = build(tmp_path / "a.bag")
+    run = run_cli("extract", bag, "--out", tmp_path / "out", cwd=tmp_path)
+    assert_one_line_error(run, str(bag), *fragments)
+    assert run.peak_rss_mb < RSS_BOUND_MB
+    assert not list(tmp_path.glob("out/lidar/*"))

@@ -23,11 +23,11 @@ def count_rows(path: Path, body: bytes, ncols: int, first_line: int = 1) -> int:
     if b.size == 0:
         return 0
     token = ~_SPACE[b]
-    starts = np.flatnonzero(token[1:] & ~token[:-1]) + 1
-    if token[0]:
-        starts = np.concatenate([[0], starts])
-    line_of = np.searchsorted(np.flatnonzero(b == ord("\n")), starts)  # the line each token is on
-    per_line = np.bincount(line_of)
+    starts = token.copy()  # the first byte of each token
+    starts[1:] &= ~token[:-1]
+    line_starts = np.flatnonzero(b == ord("\n")) + 1
+    line_starts = np.concatenate([[0], line_starts[line_starts < b.size]])
+    per_line = np.add.reduceat(starts, line_starts, dtype=np.int64)  # tokens on each line
     filled = per_line[per_line > 0]
     wrong = np.flatnonzero((per_line > 0) & (per_line != ncols))
     if wrong.size:

@@ -201,8 +201,6 @@ def open_npz(path: Path) -> "np.lib.npyio.NpzFile":
 
 
 def _check_npz_member(path: Path, zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> None:
-    import numpy as np
-
     name = info.filename
     if not name.endswith(".npy"):
         raise InputError(path, f"the .npz member {name!r} is not a .npy array")
