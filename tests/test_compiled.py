@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import in_image, project_points
-from l2e_studio.compiled import bilinear, count_pairs, e_bins, pixel_index
+from l2e_studio.compiled import bilinear, count_events, count_pairs, e_bins, pixel_index
 
 K = np.array([[610.0, 0.0, 322.5], [0.0, 612.0, 241.0], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -116,3 +116,25 @@ def test_bilinear_lookup_and_its_derivatives_match_scipy_and_finite_differences(
     assert same_cell.mean() > 0.9
     assert np.allclose(((e_u - e) / h)[same_cell], du[same_cell], atol=0.05)
     assert np.allclose(((e_v - e) / h)[same_cell], dv[same_cell], atol=0.05)
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.int32, np.int64])
+def test_count_events_matches_numpy_select_and_add(dtype) -> None:
+    """Events in [begin, end) counted at (y, x); those off the grid (negative too) only reported."""
+    rng = np.random.default_rng(9)
+    n = 50_000
+    x = rng.integers(-3 if dtype != np.uint16 else 0, W + 5, n).astype(dtype)
+    y = rng.integers(-3 if dtype != np.uint16 else 0, H + 5, n).astype(dtype)
+    t = np.sort(rng.integers(0, 1_000_000, n)).astype(np.int64)
+    begin, end = 200_000, 700_000
+    grid = np.zeros((H, W), np.int64)
+    grid[5, 7] = 3  # counts add to what is there
+    inside, outside = count_events(x, y, t, begin, end, grid)
+    win = (t >= begin) & (t < end)
+    on = win & (x >= 0) & (x < W) & (y >= 0) & (y < H)
+    expected = np.zeros((H, W), np.int64)
+    expected[5, 7] = 3
+    np.add.at(expected, (y[on].astype(np.int64), x[on].astype(np.int64)), 1)
+    np.testing.assert_array_equal(grid, expected)
+    assert (inside, outside) == (int(on.sum()), int((win & ~on).sum()))
+    assert 0 < outside < inside

@@ -329,9 +329,7 @@ def _accumulate(bag: Path, sl: _Slice, s: ExtractSettings) -> tuple[np.ndarray, 
     size = (s.width, s.height) if s.width and s.height else sl.size
     counter = _Counter(size)
     for x, y, t, _ in sl.chunks:
-        sel = (t >= begin) & (t < end)
-        if sel.any():
-            counter.add(x[sel], y[sel])
+        counter.add_window(x, y, t, begin, end)
     if counter.total == 0:
         raise InputError(bag, "no events inside the accumulation window")
     return np.clip(counter.grid, 0, 127).astype(np.float32), counter.total
