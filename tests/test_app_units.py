@@ -374,3 +374,11 @@ def test_pair_spread_flags_far_only_pairs_and_passes_near_and_far_ones():
     assert "close to the camera" in text and "other distances" in text and "40." in text
     # two pairs cannot pin six parameters
     assert not np.isfinite(pair_spread(ext, good[:2], cam).translation_std).any()
+
+
+def test_default_point_size_follows_the_scan_density():
+    from l2e_studio.app.overlay import default_point_size
+
+    assert default_point_size(20_000, 727, 220) == 2  # a 64-beam scan on KITTI's letterbox image
+    assert default_point_size(6_000, 727, 546) == 3  # a 16-beam scan on a 4:3 photo
+    assert default_point_size(50, 727, 546) == 5 and default_point_size(0, 727, 546) == 5  # never huge

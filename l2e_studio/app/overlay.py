@@ -51,6 +51,18 @@ class OverlayStyle:
             raise ValueError(f"outline must be 0..4 px, got {self.outline}")
 
 
+#: Share of the frame the points should cover at the default size: enough to read a sparse
+#: 16-beam scan at a glance, little enough that a dense 64-beam one leaves the image visible.
+DEFAULT_COVER = 0.15
+
+
+def default_point_size(n_visible: int, frame_width: int, frame_height: int, lo: int = 2, hi: int = 5) -> int:
+    """Screen pixels across for ``n_visible`` points on a frame of that size, so that their discs
+    would cover about :data:`DEFAULT_COVER` of it (2 px for a 64-beam scan on a photo, 3-4 for 16 beams)."""
+    area = DEFAULT_COVER * frame_width * frame_height / max(int(n_visible), 1)
+    return int(np.clip(round(float(np.sqrt(area))), lo, hi))
+
+
 def default_color_by(map_kind: str) -> str:
     """Depth for camera images (a photo's own colours drown intensity shades; depth edges show
     where the points should sit), intensity for event maps (their black background shows any

@@ -11,7 +11,8 @@ from ..browser_js import hide_inputs, pointer_marker
 from ..display import MAP_MODES
 from ..exact import parse_number
 from ..inspect import ZOOMS, Window, cropped, depth_range, edge_view, legend_html, zoom_window
-from ..overlay import COLOR_MODES, OverlayStyle, default_color_by, encode_jpeg, project_scene, render_view
+from ..overlay import (COLOR_MODES, OverlayStyle, default_color_by, default_point_size, encode_jpeg, project_scene,
+                       render_view)
 from ..readout import MiReading
 from ..state import Snapshot
 from ..text import score_num
@@ -20,7 +21,6 @@ DISPLAY_WIDTH = 640  # px: previews are at most this wide; frames at rest take t
 FRAME_BYTES = 60_000  # at most this much per update per tab (what an SSH tunnel carries in a blink)
 REST_QUALITIES = (92, 85, 78, 70, 62, 55, 48, 40)  # the frame at rest: the best of these within FRAME_BYTES
 PREVIEW_QUALITIES = (50, 40, 30)  # while a control moves: fast, and within FRAME_BYTES
-POINT_SIZE_PX = 2  # screen px (plus the dark outline): a 64-beam scan on a 1920-px photo shown ~730 px wide reads at a glance
 PANEL_WIDTH = 760  # px at start; then from the window's width (see ``panel_layout``)
 CONTROLS_PX = 400  # about the width of the controls docked right (control_width="large")
 MIN_3D_PX = 220  # what the 3D view keeps between the overlay and the controls
@@ -118,6 +118,8 @@ class OverlayPanel:
         gui = app.server.gui
         cam = app.camera
         kind = app.scene_set.scenes[0].map_kind if app.scene_set.scenes else "events"
+        seen = project_scene(app.scene_set.scenes[0].points, app.state.reference, cam).index.size
+        size = default_point_size(seen, PANEL_WIDTH - 24, round((PANEL_WIDTH - 24) * cam.height / cam.width))
         self.panel = gui.add_panel()
         self.frames = 0
         self.rest_frame = True  # whether the last frame sent was the one at rest (not a preview)
@@ -148,8 +150,9 @@ class OverlayPanel:
                 self.color_by = gui.add_dropdown("Colour by", COLOR_MODES, initial_value=default_color_by(kind),
                                                  hint="Colour the lidar points by their intensity or their depth "
                                                       "(default: depth on camera images, intensity on event maps)")
-                self.point_size = gui.add_slider("Point size (px)", 1, 8, 1, POINT_SIZE_PX,
-                                                 hint="Disc diameter in screen pixels: the same at any zoom and map size")
+                self.point_size = gui.add_slider("Point size (px)", 1, 8, 1, size,
+                                                 hint="Disc diameter in screen pixels: the same at any zoom and map size "
+                                                      "(the default from the scan's density)")
                 self.outline = gui.add_checkbox("Dark outline", True,
                                                 hint="A dark ring around each point: readable on bright and dark images")
                 self.opacity = gui.add_slider("Opacity", 0.0, 1.0, 0.05, 0.8,

@@ -72,6 +72,7 @@ class PairsPanel:
         self.picking = False
         self._marker = None
         self._pair_markers: list = []
+        self._markers_for: tuple = ()
         self.pick.on_click(lambda event: self.set_picking(not self.picking))
         self.text.on_update(lambda _: self.show())
         self.edit.on_click(lambda event: self._edit(self.edit.value))
@@ -119,13 +120,21 @@ class PairsPanel:
         self.app.server.scene.remove_click_callback()
         self.pending = point
         self._remove_marker()
-        self._marker = self.app.server.scene.add_icosphere("/pair_pick", radius=self.marker_radius(point),
-                                                           color=(255, 0, 200), position=point)
+        self._marker = self._markers("/pair_pick", [point], (255, 0, 200))
         seen = project_scene(np.asarray([point]), self.app.state.snapshot().extrinsic, self.app.camera).index.size
         self.status.content = (f"Lidar point ({', '.join(f'{a:.3f}' for a in point)}) m. "
                                "Now click the same spot on the **overlay**."
                                + ("" if seen else "  \n⚠ At the current extrinsic the camera does not see this "
                                   "point (a dimmed one): is it the one you meant? Stop picking removes it."))
+
+    def _markers(self, name: str, points: list, colour: tuple[int, int, int]):
+        """Markers drawn as one point cloud of fat points (the lidar cloud's kind of node: a mesh
+        would cost a browser without a GPU up to a minute compiling its shader), each as wide as
+        :meth:`marker_radius` says for the farthest one."""
+        pts = np.asarray(points, np.float32).reshape(-1, 3)
+        size = 2.0 * max(self.marker_radius(p) for p in pts)
+        return self.app.server.scene.add_point_cloud(name, pts, np.tile(np.array(colour, np.uint8), (len(pts), 1)),
+                                                     point_size=size, point_shape="circle", point_shading="flat")
 
     def _remove_marker(self) -> None:
         if self._marker is not None:
@@ -179,15 +188,15 @@ class PairsPanel:
 
     def _show_pair_markers(self, pairs: list[Pair]) -> None:
         """A green marker on each pair's lidar point while picking (none otherwise)."""
+        key = (self.picking, tuple(p.point for p in pairs))
+        if key == self._markers_for:  # show() runs on every extrinsic change
+            return
+        self._markers_for = key
         for m in self._pair_markers:
             m.remove()
         self._pair_markers = []
-        if not self.picking:
-            return
-        scene = self.app.server.scene
-        for k, p in enumerate(pairs):
-            self._pair_markers.append(scene.add_icosphere(f"/pairs/{k}", radius=self.marker_radius(p.point),
-                                                          color=(40, 220, 90), position=p.point))
+        if self.picking and pairs:
+            self._pair_markers.append(self._markers("/pairs", [p.point for p in pairs], (40, 220, 90)))
 
     def _on_solve(self, event) -> None:
         pairs = self.pairs()

@@ -1,0 +1,246 @@
+"""The workbench at a laptop's 1366x768, in a real browser (headless Debian Chromium): seed values
+refused beside their field and never left out of step with the state, the tabs on one row, the
+picking mode for PnP, a saved result offered as a download, and a real rig at default settings
+(skipped when ../shared/realdata is absent). Screenshots land in ``test-artifacts/app/``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app_fixtures import free_port, launch_browser, screenshot, wait_for
+from test_app_browser import (app, browser, close_webgl_notice, exact_field, open_app, open_tab,  # noqa: F401
+                              scene_set, slider_root)
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(300)]
+
+LAPTOP = {"width": 1366, "height": 768}
+REALDATA = Path(os.environ.get("L2E_REALDATA", Path(__file__).resolve().parents[2] / "shared" / "realdata"))
+if not REALDATA.is_dir():  # a worktree beside the main checkout
+    REALDATA = Path("/work/shared/realdata")
+
+
+@pytest.fixture
+def laptop(browser, app):  # noqa: F811
+    context = browser.new_context(viewport=LAPTOP, accept_downloads=True)
+    context.set_default_timeout(30_000)
+    page = context.new_page()
+    open_app(page, app)
+    yield page
+    context.close()  # before the app stops
+
+
+def problem_beside(page, axis: str):
+    """The warning element right after the ``axis =`` field (before its nudge buttons)."""
+    field = exact_field(page, axis)
+    return field, page.locator(f"xpath=//label[normalize-space()='{axis} =']/following::*[contains(., '⚠')][1]")
+
+
+def test_refused_seed_values_are_said_beside_the_field_and_reset_puts_field_and_state_in_step(laptop, app):
+    page = laptop
+    open_tab(page, "Seed")
+    before = app.state.snapshot().extrinsic
+    x, _ = problem_beside(page, "x")
+    x.fill("1e9")
+    note = page.get_by_text("x: 1e9 m is outside [-100, 100] m").first
+    note.wait_for()
+    assert app.state.snapshot().extrinsic is before  # refused: nothing changed
+    # beside the field: just below it, and on screen while the field is
+    fbox, nbox = x.bounding_box(), note.bounding_box()
+    assert 0 <= nbox["y"] - (fbox["y"] + fbox["height"]) < 60 and nbox["y"] + nbox["height"] <= LAPTOP["height"]
+    screenshot(page, "30_seed_refused_beside_field")
+    roll = exact_field(page, "roll")
+    roll.fill("1e300")
+    page.get_by_text("outside [-180, 180] °").first.wait_for()
+    assert app.extrinsic.values[3] == 0.0 and app.state.snapshot().extrinsic is before
+    roll.fill("abc")
+    page.get_by_text("roll: “abc” is not a number").first.wait_for()
+    # a valid value is taken; then Reset puts every field, slider and the state back together
+    roll.fill("1.5")
+    wait_for(lambda: app.extrinsic.values[3] == 1.5, what="roll = 1.5")
+    page.get_by_role("button", name="Reset to file seed").click()
+    wait_for(lambda: app.extrinsic.values[3] == 0.0, what="reset")
+    wait_for(lambda: roll.input_value() == "0" and x.input_value() == app.extrinsic.fields[0].value, what="fields reset")
+    assert app.extrinsic.sliders[3].value == 0.0 and not any(p.visible for p in app.extrinsic.problems)
+    assert np.allclose(app.state.snapshot().extrinsic.params, app.state.reference.params)
+    assert page.get_by_text("outside [-100, 100]").count() == 0
+    # the next nudge moves from 0, not from a refused value
+    page.get_by_role("button", name="+ 0.1°").first.click()
+    wait_for(lambda: app.extrinsic.values[3] == pytest.approx(0.1, abs=1e-12), what="nudge from 0")
+    x.fill("1e9")
+    page.get_by_text("x: 1e9 m is outside").first.wait_for()
+    page.get_by_role("button", name="Undo").click()  # undo rewrites the fields: the refusal goes with its text
+    wait_for(lambda: app.extrinsic.values[3] == 0.0, what="undo")
+    wait_for(lambda: x.input_value() != "1e9", what="x rewritten")
+    assert not any(p.visible for p in app.extrinsic.problems)
+    screenshot(page, "31_seed_after_reset")
+
+
+def test_tabs_fit_one_row_at_1366x768_and_stay_there_on_switching(laptop, app):
+    page = laptop
+    tabs = page.get_by_role("tab")
+    names = ["Scenes", "Seed", "Optimise", "Result", "QA"]
+    for name in names + ["Overlay"]:
+        page.get_by_role("tab", name=name).wait_for()
+
+    def rows() -> set[float]:
+        return {round(page.get_by_role("tab", name=n).bounding_box()["y"]) for n in names}
+
+    assert len(rows()) == 1, rows()
+    for name in names:
+        open_tab(page, name)
+        time.sleep(0.2)
+        assert len(rows()) == 1, (name, rows())
+    assert tabs.count() >= len(names)
+    screenshot(page, "32_tabs_one_row_1366")
+
+
+def test_picking_mode_looks_through_the_camera_and_widens_the_3d_view(laptop, app):
+    from types import SimpleNamespace
+
+    page = laptop
+    open_tab(page, "Seed")
+    page.get_by_text("Initial guess from clicked pairs").click()
+    client = wait_for(lambda: next(iter(app.server.get_clients().values()), None), what="a client")
+    width0 = app.overlay.display_width
+    page.get_by_role("button", name="Start picking").click()
+    wait_for(lambda: app.pairs.armed, what="picking armed")
+    page.get_by_role("button", name="Stop picking").wait_for()
+    # the overlay narrows so that the 3D view gets most of what the controls leave
+    wait_for(lambda: app.overlay.display_width < 0.7 * width0, what="a narrower overlay")
+    # every tab looks from the camera's pose, along its optical axis, image up
+    inv = app.state.snapshot().extrinsic.inverse()
+    wait_for(lambda: np.allclose(client.camera.position, inv.translation, atol=1e-3), what="the viewer at the camera")
+    forward = np.asarray(client.camera.look_at) - np.asarray(client.camera.position)
+    assert np.degrees(np.arccos(forward @ inv.R[:, 2] / np.linalg.norm(forward))) < 0.5
+    assert not app.view3d.gizmo.visible
+    # points the camera cannot see are dimmed, those it sees keep their colours
+    pts, colours = app.displays[0].cloud()
+    shown = np.asarray(app.view3d.cloud.colors)
+    from l2e_studio.app.overlay import project_scene
+
+    seen = np.zeros(len(pts), bool)
+    seen[project_scene(pts, app.state.snapshot().extrinsic, app.camera).index] = True
+    assert seen.any() and (~seen).any()
+    assert np.array_equal(shown[seen], colours[seen]) and (shown[~seen].astype(int) <= colours[~seen] * 0.3).all()
+    # pick one point and its pixel: armed again at once for the next pair, marker scaled with distance
+    k = int(np.flatnonzero(seen)[0])
+    app.pairs._on_scene_click(SimpleNamespace(ray_origin=tuple(inv.translation), ray_direction=tuple(pts[k] - inv.translation)))
+    page.get_by_text("Now click the same spot").first.wait_for()
+    dist = float(np.linalg.norm(app.pairs.pending - inv.translation))
+    assert app.pairs._marker.point_size == pytest.approx(2 * max(0.03, 0.006 * dist), rel=1e-3)
+    time.sleep(1.0)
+    screenshot(page, "33_picking_mode")
+    img = page.locator("img[src^='blob:']").first
+    box = img.bounding_box()
+    img.click(position={"x": box["width"] * 0.5, "y": box["height"] * 0.5})
+    wait_for(lambda: len(app.pairs.pairs()) == 1 and app.pairs.armed and app.pairs.pending is None,
+             what="the pair added and the next pick armed")
+    page.get_by_role("button", name="Stop picking").click()
+    wait_for(lambda: app.overlay.display_width == width0 and app.view3d.gizmo.visible, what="back to the normal layout")
+
+
+def test_far_only_pairs_get_a_warning_after_solve_pnp(laptop, app):
+    from l2e_studio.app.pairs import Pair
+    from l2e_studio.geometry import project_points
+
+    page = laptop
+    truth = app.state.snapshot().extrinsic
+    rng = np.random.default_rng(1)
+    pts = np.column_stack([rng.uniform(38, 45, 8), rng.uniform(-10, 10, 8), rng.uniform(-3, 3, 8)])
+    uv, _ = project_points(truth.transform(pts), app.camera)
+    app.pairs.text.value = "\n".join(f"{a:.4f} {b:.4f} {c:.4f}  {u:.1f} {v:.1f}" for (a, b, c), (u, v) in zip(pts, uv))
+    app.pairs.show()
+    open_tab(page, "Seed")
+    page.get_by_text("Initial guess from clicked pairs").click()
+    page.get_by_role("button", name="Solve PnP").click()
+    page.get_by_text("PnP over 8 pairs").first.wait_for()
+    page.get_by_text("add pairs close to the camera").first.wait_for()
+    assert "translation uncertain by" in app.pairs.status.content or "unconstrained" in app.pairs.status.content
+    screenshot(page, "34_pnp_far_pairs_warning")
+    assert isinstance(app.pairs.pairs()[0], Pair)
+
+
+def test_a_saved_result_is_offered_as_a_browser_download(laptop, app):
+    page = laptop
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=180_000)
+    open_tab(page, "Result")
+    page.get_by_role("button", name="Save result").click()
+    saved = wait_for(lambda: list(app.out_dir.glob("l2e_result_*.yaml")), what="the result file")
+    link = page.locator("a[download]").filter(has_text="l2e_result_").first
+    link.wait_for()
+    with page.expect_download() as info:
+        link.click()
+    got = info.value
+    assert got.suggested_filename == saved[0].name
+    assert Path(got.path()).read_bytes() == saved[0].read_bytes()
+    screenshot(page, "35_result_download")
+
+
+def test_editing_a_display_field_keeps_the_overlay_in_view(laptop, app):
+    page = laptop
+    img = page.locator("img[src^='blob:']").first
+    thumb = slider_root(page, "Point size (px)").get_by_role("slider")
+    thumb.scroll_into_view_if_needed()
+    y0 = img.bounding_box()["y"]
+    size0 = app.overlay.point_size.value
+    thumb.focus()
+    page.keyboard.press("ArrowRight")  # one pixel larger
+    wait_for(lambda: app.overlay.point_size.value == size0 + 1, what="point size one larger")
+    frames = app.overlay.frames
+    wait_for(lambda: app.overlay.frames > frames, what="a new frame")
+    time.sleep(1.0)
+    assert abs(img.bounding_box()["y"] - y0) < 5  # the overlay did not move away
+    screenshot(page, "36_display_edit_keeps_overlay")
+
+
+# --- a real rig at default settings ------------------------------------------------------------------
+
+RIGS = ("kitti_odometry_00", "hitsz_vlp16", "lcecalib_rles01_frame")  # 64 and 16 beams; 1241, 1440 and 346 px wide
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("rig", RIGS)
+def test_a_real_rig_at_default_settings_shows_its_points(browser, rig, tmp_path):  # noqa: F811
+    """The first screen of a real rig, untouched: the points must be visible on the photo."""
+    from l2e_studio.app.overlay import default_color_by
+    from l2e_studio.app.server import build_app
+    from l2e_studio.scenes import load_scene_folder
+
+    root = REALDATA / rig
+    if not (root / "reference.yaml").is_file():
+        pytest.skip(f"{root} is absent")
+    scene_set = load_scene_folder(root, seed_file=root / "reference.yaml")
+    real = build_app(scene_set, host="127.0.0.1", port=free_port(), out_dir=tmp_path / "results")
+    context = browser.new_context(viewport=LAPTOP)
+    try:
+        context.set_default_timeout(60_000)
+        page = context.new_page()
+        page.goto(real.url)
+        page.get_by_text("Use in optimisation").wait_for()
+        page.locator("img[src^='blob:']").first.wait_for()
+        close_webgl_notice(page)
+        assert real.overlay.color_by.value == default_color_by(scene_set.scenes[0].map_kind)
+        wait_for(lambda: real.overlay.frames > 0 and real.overlay.rest_frame, what="the frame at rest")
+        time.sleep(1.0)
+        path = screenshot(page, f"37_real_rig_default_{rig}")
+        # the overlay as shown on screen: the points' colours must cover a good share of it
+        import cv2
+
+        shot = cv2.imread(str(path))[:, :, ::-1]
+        box = page.locator("img[src^='blob:']").first.bounding_box()
+        crop = shot[int(box["y"]): int(box["y"] + box["height"]), int(box["x"]): int(box["x"] + box["width"])]
+        hsv = cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_RGB2HSV)
+        coloured = (hsv[:, :, 1] > 120) & (hsv[:, :, 2] > 80)  # the maps are grey: colour is the points
+        assert coloured.mean() > 0.002, coloured.mean()  # saturated colour on 0.2 % of the frame at least
+    finally:
+        context.close()
+        real.stop()
