@@ -203,6 +203,10 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         reasons = v.get("reasons") or []
         if reasons:
             add("<ul>" + "".join(f"<li>{_e(r if not isinstance(r, dict) else json.dumps(r))}</li>" for r in reasons) + "</ul>")
+        axes = v.get("translation_axes")
+        advice = [a["advice"] for a in axes.values() if isinstance(a, dict) and a.get("advice")] if isinstance(axes, dict) else []
+        if advice:
+            add("<h3>Translation: what to record</h3><ul>" + "".join(f"<li>{_e(a)}</li>" for a in advice) + "</ul>")
         add(f"<pre>{_e(json.dumps(v, indent=2, default=str))}</pre>")
     elif v is not None:
         add(f"<pre>{_e(v)}</pre>")

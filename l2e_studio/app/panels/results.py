@@ -104,9 +104,8 @@ VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "�
 def verdict_text(verdict) -> str:
     """The verdict in words, with why (markdown)."""
     head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
-    if not verdict.reasons:
-        return head
-    return head + "".join(f"  \n· {r}" for r in verdict.reasons)
+    return (head + "".join(f"  \n· {r}" for r in verdict.reasons)
+            + "".join(f"  \n→ {a}" for a in verdict.advice()))
 
 
 def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
