@@ -95,6 +95,8 @@ class Verdict:
     seconds: float
     #: per camera axis (x right, y down, z forward): is the translation pinned, and if not what to record
     translation: tuple["AxisPinned", ...] = ()
+    #: the axes whose translation is the seed's in what is handed back (``trusted-rotation``)
+    seed_axes: str = "xyz"
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -108,6 +110,11 @@ class Verdict:
         """One line a user understands (the reasons are in ``reasons``)."""
         if self.status == "trusted":
             return "trusted: both halves of the data, a second start and an independent score agree with the result"
+        if self.status == "trusted-rotation" and self.seed_axes != "xyz":
+            taken = ", ".join(a for a in "xyz" if a not in self.seed_axes)
+            kept = ", ".join(self.seed_axes)
+            return (f"rotation and the translation along {taken} trusted; along {kept} the translation is not "
+                    f"pinned down by these scenes, the seed's is kept")
         if self.status == "trusted-rotation":
             return "rotation trusted; the translation is not pinned down by these scenes, the seed's translation is kept"
         return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")
@@ -126,6 +133,7 @@ class Verdict:
             "status": self.status,
             "summary": self.summary(),
             "kept_seed": self.kept_seed,
+            **({"translation_from_seed": list(self.seed_axes)} if self.status == "trusted-rotation" else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
@@ -284,15 +292,22 @@ def judge(
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
     if not failed:
-        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0, axes)
+        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0, axes, "")
     if all(c.name.endswith("(translation)") for c in failed):
         # Only the translation is not pinned down (one or two scans of a street seldom pin it):
         # hand back the checked rotation with the seed's translation, if the scenes and both
         # halves prefer that to the seed too.
-        mixed = Extrinsic(res.rotvec, seed.translation)
-        if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0]
-               for h in (final, *(final.select(m) for m in halves(final, seed)))):
-            return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0, axes)
+        # Where halves and the second start agree on the translation, the axes the scenes pin
+        # are the result's (the others the seed's); else all three are the seed's.
+        agree = all(c.passed for c in checks if c.name in ("halves agree (translation)", "second start (translation)"))
+        pinned = np.array([a.pinned for a in axes]) if agree and axes else np.zeros(3, dtype=bool)
+        sides = [final, *(final.select(m) for m in halves(final, seed))]
+        for take in ([pinned, np.zeros(3, dtype=bool)] if pinned.any() else [pinned]):
+            mixed = Extrinsic(res.rotvec, np.where(take, res.translation, seed.translation))
+            if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides):
+                kept = "".join(a for a, t in zip("xyz", take) if not t)
+                return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0,
+                               axes, kept)
     if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
             (rival is None or rival.passed):
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,

@@ -116,6 +116,8 @@ def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
         return "yellow", "Accept as seed (not judged)"
     if verdict.status == "trusted":
         return "green", "Accept as seed"
+    if verdict.status == "trusted-rotation" and verdict.seed_axes != "xyz":
+        return "green", f"Accept (seed's translation kept along {', '.join(verdict.seed_axes)})"
     if verdict.status == "trusted-rotation":
         return "green", "Accept rotation (seed's translation kept)"
     return "red", "Accept anyway (not trusted)"
