@@ -66,7 +66,7 @@ RIVAL_SHARE = 0.9  # ... with this share of its score (or more) is a second answ
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
 FAR_DEG = (2.0, 8.0)  # the far field of a peak: random rotations this far from it (deg) ...
 FAR_SAMPLES = 48  # ... this many of them (a fixed pattern, so a verdict is repeatable) ...
-FAR_POINTS = 200_000  # ... scored on at most this many points
+FAR_POINTS = 100_000  # ... scored on at most this many points
 CELL_DEG = 0.1  # the landscape's resolution: the searched box holds (width / CELL_DEG)^3 independent cells
 #: Per camera axis: what moves its translation, and what to record when the scenes do not pin it.
 AXIS_ADVICE = {
