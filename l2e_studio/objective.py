@@ -67,10 +67,6 @@ class SceneStack:
     full_camera: CameraModel | None = None
     objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
     weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
-    #: the least smoothing (full-resolution px) :meth:`with_sigma` gives: for edges, half the
-    #: lidar's spacing along its rings as the camera sees it (an edge point is only known to
-    #: within that; finer smoothing makes the score's landscape spiky on narrow lenses)
-    sigma_floor: float = 0.0
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -112,10 +108,6 @@ class SceneStack:
             owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
         raw = tuple(np.asarray(sc.event_map, dtype=np.float32) for sc in scenes)
         kinds = tuple(sc.map_kind for sc in scenes)
-        floor = 0.0
-        if objective == "edges":
-            floor = 0.5 * float(camera.K[0, 0]) * edges.azimuth_spacing(np.asarray(scenes[0].points, dtype=np.float32))
-            sigma = max(float(sigma), floor)
         return cls(
             camera=camera,
             names=tuple(sc.name for sc in scenes),
@@ -129,14 +121,11 @@ class SceneStack:
             full_camera=camera,
             objective_name=objective,
             weights=np.concatenate(weights) if objective == "edges" else None,
-            sigma_floor=floor,
         )
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
         """The same points over maps smoothed with another sigma (full-resolution pixels),
-        optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages; never less
-        than :attr:`sigma_floor`."""
-        sigma = max(float(sigma), self.sigma_floor)
+        optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages."""
         if sigma == self.sigma and scale == self.scale:
             return self
         full = self.full_camera or self.camera

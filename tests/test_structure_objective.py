@@ -205,3 +205,16 @@ def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
     fake = significance_check(noisy.with_sigma(settings.sigma), truth, settings)
     assert not fake.passed, fake.detail
     assert 5.0 < noise_ceiling(settings) < 6.0  # +-10 deg at 0.1 deg cells
+
+
+def test_a_verdict_says_which_axes_come_from_the_seed_and_what_to_record() -> None:
+    from l2e_studio.verdict import Verdict, translation_axes
+
+    axes = translation_axes(np.array([0.3, 0.2, 0.04]), "edges")
+    v = Verdict("trusted-rotation", Extrinsic(np.zeros(3), np.zeros(3)), False, ("r",), (), 0.0, axes, "z")
+    assert "translation along x, y trusted" in v.summary() and "along z" in v.summary()
+    d = v.to_dict()
+    assert d["translation_from_seed"] == ["z"]
+    assert d["translation_axes"]["x"] == {"pinned": True, "score_drop": 0.3}
+    assert "left and right edges" in d["translation_axes"]["z"]["advice"]
+    assert v.lines()[-1].startswith("  > z is not pinned")

@@ -108,25 +108,6 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
     return w.astype(np.float32)
 
 
-def azimuth_spacing(points: np.ndarray) -> float:
-    """The scan's median angle (radians) between a point and its nearest horizontal neighbour:
-    how finely the lidar samples along its rings (0 when it cannot tell)."""
-    P = np.asarray(points, dtype=np.float64)
-    r = np.linalg.norm(P, axis=1)
-    P = P[np.isfinite(r) & (r > 1e-6)]
-    if len(P) < 3:
-        return 0.0
-    d = P / np.linalg.norm(P, axis=1)[:, None]
-    _, nb = cKDTree(d).query(d, k=3, workers=-1)
-    az = np.arctan2(P[:, 1], P[:, 0])
-    el = np.arcsin(np.clip(d[:, 2], -1.0, 1.0))
-    daz = np.abs(np.angle(np.exp(1j * (az[nb[:, 1:]] - az[:, None]))))
-    horizontal = (np.abs(el[nb[:, 1:]] - el[:, None]) < HORIZONTAL * daz) & (daz > 0)
-    gaps = np.where(horizontal, daz, np.inf).min(axis=1)
-    gaps = gaps[np.isfinite(gaps)]
-    return float(np.median(gaps)) if gaps.size else 0.0
-
-
 def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1."""
     g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
