@@ -129,7 +129,7 @@ def sweeps(rigs, path: Path) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--runs", type=int, default=20)
+    p.add_argument("--runs", type=int, default=20, help="runs per rig and seed level (0: none, e.g. with --sweeps)")
     p.add_argument("--rigs", default="all")
     p.add_argument("--levels", default="1,2,5,0", help="seed levels: 1 (1 deg / 5 cm), 2, 5, 0 (the reference)")
     p.add_argument("--variants", default="mi,new")
@@ -148,9 +148,9 @@ def main() -> None:
         sys.exit("no real data found under ../shared/realdata (set L2E_REALDATA)")
     if args.sweeps:
         sweeps(rigs, OUT / "realdata_sweeps.png")
-    levels = [LEVELS[int(k)] for k in args.levels.split(",")]
+    levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows = []
-    for rig in rigs:
+    for rig in rigs if levels else ():
         rows += run_rig(rig, args.runs, levels, args.variants.split(","))
         if args.save:
             args.save.write_text(json.dumps(rows, indent=1))

@@ -25,7 +25,8 @@ Per translation axis the verdict says whether the scenes pin it, and what to rec
 (:func:`translation_axes`).
 
 All agree: ``trusted``. Only the translation checks fail (one or two street scans seldom pin the
-translation): ``trusted-rotation``, the checked rotation with the seed's translation, if the scenes
+translation): ``trusted-rotation``, the checked rotation with the seed's translation (the result's
+along the axes the scenes pin, when the halves and the second start agree on it), if the scenes
 and both halves prefer that to the seed; when the rotation's checks failed too, a rotation fitted
 to the seed's translation gets a second chance on the same evidence. Otherwise ``not-trusted``:
 the seed is handed back (the default) or the result is kept and marked, as the caller chooses;
