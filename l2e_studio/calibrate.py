@@ -26,7 +26,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
@@ -135,6 +135,11 @@ class CalibrationResult:
     objective: str = "mi"  # the score climbed and reported in ``score_*``
     #: where each start of the global search ended, with its final score (empty without it)
     ends: tuple[tuple[Extrinsic, float], ...] = ()
+    #: the calibration method: "targetless" (the score climb above) or "target" (a checkerboard,
+    #: :func:`l2e_studio.target.calibrate_target`)
+    method: str = "targetless"
+    #: the target method's per-frame table and uncertainty (:class:`l2e_studio.target.TargetDetail`)
+    target: Any = None
 
 
 class _Cancelled(Exception):

@@ -83,10 +83,14 @@ def result_to_dict(
                 for n, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene)
             ],
         },
+        "method": result.method,
         "evaluations": int(result.evaluations),
         "optimisation_seconds": round(float(result.seconds), 4),
         "scenes": list(result.scene_names),
     }
+    if result.target is not None:  # the checkerboard method: its per-frame table and uncertainty
+        out["optimiser"]["method"] = "least_squares"
+        out["target"] = result.target.to_dict()
     if verdict is not None:
         out["verdict"] = verdict.to_dict()
         out["optimiser_result"] = extrinsic_to_dict(result.extrinsic)

@@ -189,16 +189,16 @@ def test_held_out_scenes_are_in_the_result_table_and_file_and_saved_text_is_neve
 
 
 def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(page, app, monkeypatch):
-    import l2e_studio.app.server as server_module
+    import l2e_studio.app.runs as runs_module
 
-    real = server_module.calibrate
+    real = runs_module.calibrate
 
     def slow_to_stop(*args, **kwargs):  # an optimiser that takes 1.5 s to wind down after a cancel
         result = real(*args, **kwargs)
         time.sleep(1.5)
         return result
 
-    monkeypatch.setattr(server_module, "calibrate", slow_to_stop)
+    monkeypatch.setattr(runs_module, "calibrate", slow_to_stop)
     app.optimise.method.value = "Nelder-Mead"
     open_tab(page, "Optimise")
     page.get_by_role("button", name="Start").click()

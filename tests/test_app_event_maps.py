@@ -132,16 +132,16 @@ def test_a_failed_rebuild_keeps_the_old_map_and_says_why(app, event_folder):
 
 def test_rebuild_waits_for_a_run_and_a_run_waits_for_a_rebuild(app, monkeypatch):
     import l2e_studio.app.rebuild as rebuild_module
-    import l2e_studio.app.server as server_module
+    import l2e_studio.app.runs as runs_module
 
     release = threading.Event()
-    real_calibrate, real_reaccumulate = server_module.calibrate, rebuild_module.reaccumulate
+    real_calibrate, real_reaccumulate = runs_module.calibrate, rebuild_module.reaccumulate
 
     def slow_calibrate(*args, **kwargs):
         release.wait(30)
         return real_calibrate(*args, **kwargs)
 
-    monkeypatch.setattr(server_module, "calibrate", slow_calibrate)
+    monkeypatch.setattr(runs_module, "calibrate", slow_calibrate)
     app.start_run(CalibrationSettings(rotation_only=True, coarse_to_fine=False, max_iterations=5))
     try:
         with pytest.raises(RuntimeError, match="optimisation is running"):

@@ -169,13 +169,13 @@ def test_sliders_widen_their_range_for_a_far_extrinsic(app):
 
 
 def test_a_failing_run_is_reported_and_the_app_carries_on(app, monkeypatch):
-    import l2e_studio.app.server as server_module
+    import l2e_studio.app.runs as runs_module
 
     def broken(*args, **kwargs):
         raise ValueError("the optimiser fell over")
 
     notes = []
-    monkeypatch.setattr(server_module, "calibrate", broken)
+    monkeypatch.setattr(runs_module, "calibrate", broken)
     monkeypatch.setattr(app, "notify_all", lambda title, body, color=None: notes.append((title, body)))
     app.start_run(CalibrationSettings())
     assert app.wait_run(30)

@@ -19,11 +19,10 @@ from typing import Any, Callable
 import numpy as np
 import viser
 
-from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
+from ..calibrate import CalibrationResult, CalibrationSettings
 from ..geometry import Extrinsic
 from ..io.events import Accumulation, EventStats
 from ..scenes import Scene, SceneSet
-from ..verdict import Verdict, judge
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .heldout import HeldOutScore, held_out_scores
@@ -37,17 +36,17 @@ from .panels.qa import QAPanel
 from .panels.overlay_view import OverlayPanel
 from .panels.results import ResultPanel
 from .panels.scenes import ScenesPanel
+from .panels.target import TargetPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
 from .rebuild import MapRebuilder, RebuildSummary, RecordingInfo
 from .state import SessionState
-from .text import num, score_label
-from .workers import LatestWorker, Settle, Ticker
+from .runs import METHOD_NAMES, Runner, checkerboard, targetless
+from .workers import LatestWorker, Settle
 
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
-PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
 OVERLAY_REST_S = 0.3  # s without a change before the frame at rest replaces the preview
 #: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
@@ -75,11 +74,9 @@ class App:
         self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self._reference_mi: dict[tuple, float] = {}
-        self._cancel: threading.Event | None = None
-        self._run_thread: threading.Thread | None = None
-        self._ticker: Ticker | None = None
+        self.runner = Runner(self)
         self.overlay_seconds: list[float] = []  # server-side render+encode time of each frame
-        self._ui_lock = threading.RLock()  # one change at a time: state and widgets stay in step
+        self.ui_lock = threading.RLock()  # one change at a time: state and widgets stay in step
 
         gui = server.gui
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(28, 126, 214))
@@ -95,6 +92,8 @@ class App:
             self.pairs = PairsPanel(self)
         with tabs.add_tab("Optimise", viser.Icon.PLAYER_PLAY):
             self.optimise = OptimisePanel(self)
+        with tabs.add_tab("Target", viser.Icon.GRID_DOTS):
+            self.target = TargetPanel(self)
         with tabs.add_tab("Result", viser.Icon.CHECKLIST):
             self.results = ResultPanel(self)
         with tabs.add_tab("QA", viser.Icon.REPORT_ANALYTICS):
@@ -129,24 +128,24 @@ class App:
 
         ``values``: the Seed panel's exact six numbers when the change came from there.
         """
-        with self._ui_lock:
+        with self.ui_lock:
             self.state.set_extrinsic(extrinsic, source)
             self._show_extrinsic(extrinsic, source, values)
 
     def undo(self) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             ext = self.state.undo()
             if ext is not None:
                 self._show_extrinsic(ext, "undo")
 
     def redo(self) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             ext = self.state.redo()
             if ext is not None:
                 self._show_extrinsic(ext, "redo")
 
     def _show_extrinsic(self, extrinsic: Extrinsic, source: str, values: np.ndarray | None = None) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             self.extrinsic.show(extrinsic, values, source)
             if source in DEFERRED_3D_SOURCES:
                 self._pose_3d_pending = True  # the 3D view follows once the input rests
@@ -159,11 +158,12 @@ class App:
         self.mi_worker.poke()
 
     def select_scene(self, index: int) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             self.state.select(index)
         self.overlay_worker.poke()  # first: the overlay is what the user is waiting for
-        with self._ui_lock:
+        with self.ui_lock:
             self.scenes.show_selection()
+            self.target.show_table()
             self.event_maps.show()
         self.scene_3d_worker.poke()  # the 3D cloud (~600 KB to draw) follows the overlay's frame
         self.recording_worker.poke()
@@ -172,13 +172,32 @@ class App:
 
     def _show_scene_3d(self) -> None:
         self.overlay_worker.wait_idle(1.0)
-        with self._ui_lock:
-            self.view3d.show_scene(self.state.snapshot().selected)
+        with self.ui_lock:
+            selected = self.state.snapshot().selected
+            self.view3d.show_scene(selected)
+            self.target.show_3d(selected)
 
     def inclusion_changed(self) -> None:
         self.scenes.show_selection()
+        self.target.show_table()
         self.optimise.show_start()
         self.mi_worker.poke()
+
+    def target_changed(self) -> None:
+        """The board, its detections or the marks' switch changed (Target tab)."""
+        if getattr(self, "target", None) is None:  # the Target tab is being built
+            return
+        self.optimise.show_start()
+        self.overlay_worker.poke()
+        self.scene_3d_worker.poke()
+
+    def annotate(self, index: int, extrinsic: Extrinsic, image: np.ndarray, point_size: int) -> np.ndarray:
+        """The overlay of scene ``index`` with what the Target tab marks on it (board corners, board points)."""
+        return self.target.annotate(index, extrinsic, image, point_size)
+
+    def target_problem(self) -> str:
+        """Why a checkerboard run cannot start ("" when it can)."""
+        return self.target.problem()
 
     def display_changed(self) -> None:
         """A display control moved (colour, size, opacity, contrast, map)."""
@@ -240,7 +259,7 @@ class App:
         """Accumulate the selected scene's map again (or every scene's from raw events) with
         ``settings``, in the background. Raises RuntimeError (nothing starts) during a run: the
         run keeps the maps it started with, so a rebuild waits for its end."""
-        with self._ui_lock:
+        with self.ui_lock:
             if self.state.snapshot().run.active:
                 raise RuntimeError("an optimisation is running (it keeps the maps it started with); rebuild when it ends")
             scenes = self.scene_set.scenes
@@ -257,7 +276,7 @@ class App:
 
     def _map_rebuilt(self, index: int, scene: Scene) -> None:
         """A new map for scene ``index``: the readout, the display caches and every view follow."""
-        with self._ui_lock:
+        with self.ui_lock:
             self.readout.set_map(index, scene.event_map)  # first: it refuses a map that does not fit
             self.scene_set.scenes[index] = scene
             self.displays[index] = SceneDisplay(scene)  # the old display caches go with the old map
@@ -269,7 +288,7 @@ class App:
         self.compare_worker.poke()
 
     def _rebuild_finished(self, summary: RebuildSummary) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             self.event_maps.show_status(summary.line())
             self.event_maps.show()
             self.optimise.show_start()
@@ -284,7 +303,7 @@ class App:
         if scene.accumulation is None or scene.map_path is None or self.recordings.get(scene.map_path) is not None:
             return
         self.recordings.compute(scene.map_path)
-        with self._ui_lock:
+        with self.ui_lock:
             if self.state.snapshot().selected == index:
                 self.event_maps.show()
 
@@ -309,7 +328,7 @@ class App:
     def _pose_3d_at_rest(self) -> None:
         """Rapid inputs stopped: pose the 3D camera (not on every step of a drag or of a run of
         key presses, see ``POSE_3D_REST_S``)."""
-        with self._ui_lock:
+        with self.ui_lock:
             if self._pose_3d_pending:
                 self._pose_3d_pending = False
                 self.view3d.show_pose(self.state.snapshot().extrinsic)
@@ -337,104 +356,39 @@ class App:
         """The optimiser settings the Optimise tab holds now (raises ValueError when refused)."""
         return self.optimise.settings()
 
-    def start_run(self, settings: CalibrationSettings) -> int:
-        """Start an optimisation of the included scenes from the current extrinsic (RuntimeError
-        while event maps are being rebuilt)."""
-        with self._ui_lock:
-            if self.rebuilding():
-                raise RuntimeError("event maps are being rebuilt; start when that is done")
-            run_id = self.state.begin_run()
-            maps = {sc.name: sc.map_record() for sc in self.scene_set.scenes}
-        snap = self.state.snapshot()
-        cancel = threading.Event()
-        self._cancel = cancel
+    def start_run(self, settings: CalibrationSettings, method: str = METHOD_NAMES[0]) -> int:
+        """Start ``method`` (one of ``METHOD_NAMES``: the score climb with ``settings``, or the
+        checkerboard solve with the Target tab's board) on the included scenes from the current
+        extrinsic (RuntimeError while event maps are being rebuilt, ValueError for a refused board)."""
+        if method == "checkerboard":
+            board = self.target.board()
+            return self.runner.start(checkerboard(self.scene_set.scenes, self.camera, board,
+                                                  self.target.cached_detections(board)))
+        return self.runner.start(targetless(settings))
 
-        def on_progress(p: Progress) -> None:
-            self.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
-
-        def work() -> None:
-            try:
-                # the readout's stack already holds every scene: no second load or stacking
-                stack = self.readout.stack.subset(np.asarray(snap.included, dtype=bool))
-                result = calibrate(stack, None, snap.extrinsic, settings, on_progress, cancel)
-                self.result_maps = maps
-                self.state.finish_run(run_id, result, verdict=self._judge(stack, result, settings, cancel))
-            except Exception as exc:  # shown to the user; the app keeps running
-                log.exception("optimisation failed")
-                self.state.finish_run(run_id, error=f"{type(exc).__name__}: {exc}")
-            self._run_finished(run_id)
-
-        self.optimise.show_running(True)
-        self.event_maps.check()  # Rebuild waits for the run's end
-        self._ticker = Ticker("progress", self._push_progress, lambda: self.state.snapshot().run.active, PROGRESS_PERIOD)
-        self._run_thread = threading.Thread(target=work, name="l2e-calibrate", daemon=True)
-        self._run_thread.start()
-        return run_id
-
-    def _judge(self, stack, result: CalibrationResult, settings: CalibrationSettings, cancel) -> Verdict | None:
-        """The verdict on a finished run (none for a cancelled one: it is not an answer)."""
-        if result.cancelled:
-            return None
-        self.optimise.show_status("Judging the result: halves, a second start, a second score...")
-        try:
-            verdict = judge(stack, result, settings, cancel=cancel)
-        except Exception:  # the result stands without a verdict rather than being lost
-            log.exception("judging the result failed")
-            return None
-        return None if cancel.is_set() else verdict
+    def run_label(self) -> str:
+        """The name of the score the current (or last) run reports."""
+        return self.runner.label() or self.readout.label
 
     def cancel_run(self) -> bool:
-        """Ask a running optimisation to stop (it returns its best point so far)."""
-        if self._cancel is None or not self.state.snapshot().run.active:
-            return False
-        self._cancel.set()
-        self.optimise.show_progress(self.state.snapshot().run)  # "Cancelling..." at once
-        return True
+        """Ask a running calibration to stop (it returns its best point so far)."""
+        return self.runner.cancel()
 
     def cancel_requested(self) -> bool:
         """True once Cancel was pressed for the run in progress."""
-        return self._cancel is not None and self._cancel.is_set() and self.state.snapshot().run.active
+        return self.runner.cancel_requested()
 
     def wait_run(self, timeout: float = 60.0) -> bool:
-        t = self._run_thread
-        if t is not None:
-            t.join(timeout)
-            return not t.is_alive()
-        return True
+        return self.runner.wait(timeout)
 
-    def _push_progress(self) -> None:
-        snap = self.state.snapshot()
-        self.optimise.show_progress(snap.run)
-        if snap.follow_best:
-            self.overlay_worker.poke()
-
-    def _run_finished(self, run_id: int) -> None:
-        if self._ticker is not None:
-            self._ticker.stop(2.0)
-        snap = self.state.snapshot()
-        self.optimise.show_progress(snap.run)
-        self.optimise.show_running(False)
-        self.event_maps.check()
+    def result_shown(self, snap) -> None:
+        """A run ended: score its held-out scenes and show the result everywhere."""
         self.held_out = self._score_held_out(snap.result)
         self.results.show(snap, self.held_out)
+        self.target.result_shown(snap.result)
         self.overlay_worker.poke()
         self.mi_worker.poke()  # refreshes the captions
         self.compare_worker.poke()
-        run = snap.run
-        if run.status == "failed":
-            self.notify_all("Optimisation failed", run.error, color="red")
-        elif snap.result is not None:
-            r: CalibrationResult = snap.result
-            verb = "cancelled" if r.cancelled else "finished"
-            v = snap.verdict
-            self.notify_all(
-                f"Optimisation {verb}",
-                f"{score_label(r.objective)} {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} "
-                f"evaluations ({r.seconds:.1f} s)." + (f" Verdict: {v.summary()}." if v is not None else "")
-                + " See the Result tab and Before / after.",
-                color="yellow" if r.cancelled or (v is not None and v.status == "trusted-rotation")
-                else "red" if v is not None and not v.trusted else "green",
-            )
 
     # --- results ----------------------------------------------------------------------------------
     def _score_held_out(self, result: CalibrationResult | None) -> list[HeldOutScore]:
@@ -447,7 +401,7 @@ class App:
             return []
 
     def accept_result(self) -> None:
-        with self._ui_lock:
+        with self.ui_lock:
             self._show_extrinsic(self.state.accept_result(), "accept")
 
     def save_result(self) -> tuple[Path, Path | None]:
@@ -504,6 +458,7 @@ class App:
         self.pose_settle.stop()
         self.table_settle.stop()
         self.rebuilder.wait(5.0)
+        self.target.stop()
         for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.scene_3d_worker,
                        self.recording_worker):
             worker.stop()

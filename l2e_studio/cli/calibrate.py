@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", type=Path, help="scene folder (default: the embedded sample)")
     p.add_argument("--seed", type=Path, help="seed extrinsic file (overrides the folder's)")
     p.add_argument("--camera", type=Path, help="camera file (default: DIR/camera.yaml or DIR/config/config.json)")
+    p.add_argument("--target", type=Path,
+                   help="checkerboard file (target.yaml: kind, squares, square_m, size_m); calibrates from the board. "
+                        "DIR/target.yaml is used when present")
     p.add_argument("--out", type=Path, default=Path("l2e_result.yaml"),
                    help="result file, YAML or .json (default: ./l2e_result.yaml; an existing file is kept as a backup)")
     p.add_argument("--method", choices=METHODS, default="SLSQP", help="optimiser (default: SLSQP)")
@@ -72,6 +75,13 @@ def run(args: argparse.Namespace) -> int:
         if path is not None and not path.is_file():
             raise InputError(path, f"{what} does not exist" if not path.exists() else f"{what} is not a regular file")
     check_output_file(args.out)
+    from ._target import board_file, run_target
+
+    board_path, board_how = board_file(args, folder)
+    if board_path is not None:
+        from ..target import load_target
+
+        load_target(board_path)  # a bad board file is one line before any loading
 
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("loading scenes", total=None)
@@ -87,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
     for note in scene_set.notes:
         print(f"note: {note}", file=sys.stderr)
     t_loaded = time.perf_counter()
+    if board_path is not None:
+        return run_target(args, scene_set, board_path, board_how, t_start, t_loaded, _progress)
 
     seed = scene_set.seed
     check_seed_coverage([sc.points for sc in scene_set.scenes], scene_set.camera, seed, scene_set.seed_source)

@@ -7,7 +7,11 @@ from pathlib import Path
 
 
 NAME = "synth"
-HELP = "Write synthetic scenes (lidar scans + event maps) with a known true extrinsic (truth.yaml)."
+HELP = ("Write synthetic scenes (lidar scans + event maps, or checkerboard sequences with --target) with a known "
+        "true extrinsic (truth.yaml).")
+
+#: the camera kinds ``--target`` renders (:data:`l2e_studio.synth.board_views.MODALITIES`).
+MODALITIES = ("frame", "e2vid", "events", "events-moving")
 
 #: full: :class:`~l2e_studio.synth.SynthConfig`'s defaults; sample: ``SAMPLE_CONFIG`` (imported when run).
 PRESETS = ("full", "sample")
@@ -33,6 +37,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "event maps")
     p.add_argument("--traps", help="only some failure modes, comma-separated (see --realism)")
     p.add_argument("--dim", action="store_true", help="a dim cloud: intensities 0..14 (the sparse-cloud trap)")
+    board = p.add_argument_group("checkerboard sequences (--target checkerboard)")
+    board.add_argument("--target", choices=("checkerboard",),
+                       help="a board held up at a different pose in each scene (10 scenes, 10 x 7 squares of 68 mm), "
+                            "seen by a 16-beam lidar; target.yaml and each board's true pose are written too")
+    board.add_argument("--modality", choices=MODALITIES, default="frame",
+                       help="frame: a 1280x720 frame camera; e2vid: 346x260 images reconstructed from events (blur, "
+                            "noise, low contrast); events: event map of a flashing board; events-moving: of a shaken "
+                            "board (default: frame)")
+    board.add_argument("--lens", choices=("radtan", "equidistant"), default="radtan", help="lens distortion model")
+    board.add_argument("--range-noise-m", type=float, help="lidar range noise (sigma, default 0.015 m)")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder (old scene_* files are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -54,16 +68,35 @@ def config_from_args(args: argparse.Namespace):
                        traps=traps, intensity_scale=0.055 if args.dim else None)
 
 
+#: options that shape the garage scenes only (refused with --target).
+_GARAGE_ONLY = ("preset", "points", "realism", "traps", "dim", "camera_image", "no_distortion")
+
+
+def target_config_from_args(args: argparse.Namespace):
+    """The :class:`~l2e_studio.synth.TargetConfig` of ``--target`` (ValueError when out of range)."""
+    from ..synth import TargetConfig, target_config_with
+
+    given = [name for name in _GARAGE_ONLY if getattr(args, name) not in (None, False, "full")]
+    if given:
+        raise ValueError(f"--{given[0].replace('_', '-')} shapes the garage scenes, not --target sequences")
+    if (args.width is None) != (args.height is None):
+        raise ValueError("give both --width and --height with --target")
+    return target_config_with(TargetConfig(modality=args.modality, lens=args.lens), n_scenes=args.scenes,
+                              width=args.width, height=args.height, seed=args.seed,
+                              seed_error_deg=args.seed_error_deg, seed_error_m=args.seed_error_m,
+                              range_noise_m=args.range_noise_m)
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    from ..synth import check_out_dir, make_rig, write_dataset
+    from ..synth import check_out_dir, make_rig, make_target_rig, write_dataset, write_target_dataset
     from .outputs import check_output_dir
 
     err = Console(stderr=True)
     try:
-        config = config_from_args(args)
+        config = target_config_from_args(args) if args.target else config_from_args(args)
     except ValueError as exc:
         err.print(f"l2e-studio synth: error: {exc}", highlight=False)
         return 2
@@ -73,15 +106,18 @@ def run(args: argparse.Namespace) -> int:
                TimeRemainingColumn())
     with Progress(*columns, console=err, disable=args.quiet, transient=False) as prog:
         task = prog.add_task(f"writing {config.n_scenes} scenes", total=config.n_scenes)
-        out = write_dataset(args.out, config, on_scene=lambda done, total: prog.update(task, completed=done),
-                            overwrite=args.force)
-    _, truth, seed = make_rig(config)
+        write = write_target_dataset if args.target else write_dataset
+        out = write(args.out, config, on_scene=lambda done, total: prog.update(task, completed=done),
+                    overwrite=args.force)
+    _, truth, seed = make_target_rig(config) if args.target else make_rig(config)
     deg, m = seed.error_to(truth)
     if not args.quiet:
+        what = (f"{config.modality} board scenes ({'x'.join(map(str, config.size))})" if args.target else f"scenes ({config.width}x{config.height}, ~{config.points_per_scan} points)")
+        board_file = f"\n  board: {out / 'target.yaml'}" if args.target else ""
+        seed_files = out / "camera.yaml" if args.target else f"{out / 'camera.yaml'} and {out / 'config' / 'config.json'}"
         Console().print(
-            f"wrote {config.n_scenes} scenes ({config.width}x{config.height}, ~{config.points_per_scan} points) to "
-            f"{out}\n  truth: {out / 'truth.yaml'}\n  seed ({deg:.2f} deg, {m * 100:.1f} cm from the truth): "
-            f"{out / 'camera.yaml'} and {out / 'config' / 'config.json'}",
+            f"wrote {config.n_scenes} {what} to "
+            f"{out}\n  truth: {out / 'truth.yaml'}{board_file}\n  seed ({deg:.2f} deg, {m * 100:.1f} cm from the truth): {seed_files}",
             highlight=False,
         )
     return 0

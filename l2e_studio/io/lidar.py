@@ -53,6 +53,9 @@ MAX_RANGE_M = 10_000.0
 LIDAR_SUFFIXES: tuple[str, ...] = (".txt", ".csv", ".xyz", ".pcd", ".ply", ".pcd.bin", ".bin", ".npy", ".npz",
                                    ".las", ".laz")
 
+#: Field names recognised as the laser ring (beam) number, in order of preference.
+RING_NAMES: tuple[str, ...] = ("ring", "laser_id", "ring_id", "channel")
+
 #: Field names recognised as intensity, in order of preference.
 INTENSITY_NAMES: tuple[str, ...] = ("intensity", "reflectivity", "reflectance", "i", "signal", "remission", "scalar_intensity")
 
@@ -66,6 +69,7 @@ class LidarScan:
     source: Path
     intensity_field: str | None = None
     has_intensity: bool = True
+    ring: np.ndarray | None = None  # (N,) laser ring number, when the file has a ring field (RING_NAMES)
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -156,12 +160,19 @@ def _finish(path: Path, fields: dict[str, np.ndarray], intensity_field: str | No
     ok = np.all(np.isfinite(xyz), axis=1) & np.isfinite(raw) & np.any(xyz != 0.0, axis=1)
     if not np.any(ok):
         raise InputError(path, f"none of the {xyz.shape[0]} points is valid (all NaN/inf or zero returns)")
+    ring_key = next((lower[n] for n in RING_NAMES if n in lower), None)
+    ring = None
+    if ring_key is not None:
+        values = np.asarray(fields[ring_key], dtype=np.float64).reshape(-1)
+        if values.shape[0] == xyz.shape[0] and np.all(np.isfinite(values[ok])):
+            ring = values[ok].astype(np.int32)
     return LidarScan(
         points=xyz[ok].astype(np.float32),
         intensity=scale_intensity(raw[ok]),
         source=path,
         intensity_field=key,
         has_intensity=key is not None,
+        ring=ring,
     )
 
 

@@ -163,3 +163,36 @@ def scene_count_figure(counts: list[int], stds: np.ndarray) -> str:
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     return _fig_uri(fig)
+
+
+def target_residuals_figure(frames: list[dict]) -> str:
+    """Per-frame residuals of a checkerboard result (the result file's ``target.frames``): the
+    lidar board points' RMS distance to the camera's board plane and the edge points' to the
+    board's outline (mm; frames left out hatched grey), and each detection's reprojection error (px)."""
+    plt = _plt()
+    names = [str(f.get("name")) for f in frames]
+    x = np.arange(len(frames))
+    val = lambda f, k, s=1.0: np.nan if f.get(k) is None else float(f[k]) * s  # noqa: E731
+    plane = np.array([val(f, "plane_rms_m", 1000.0) for f in frames])
+    edge = np.array([val(f, "edge_rms_m", 1000.0) for f in frames])
+    rep = np.array([val(f, "reprojection_px") for f in frames])
+    used = np.array([bool(f.get("used")) for f in frames])
+    fig, (a0, a1) = plt.subplots(2, 1, figsize=(max(6.0, 0.45 * len(frames) + 2), 5.5), sharex=True)
+    w = 0.4
+    for sel, style in ((used, {}), (~used, {"color": "#bbb", "hatch": "//"})):
+        a0.bar(x[sel] - w / 2, plane[sel], w, label="plane RMS" if sel is used else None,
+               **({"color": "#1c7ed6"} | style))
+        a0.bar(x[sel] + w / 2, edge[sel], w, label="edge RMS" if sel is used else None,
+               **({"color": "#e8590c"} | style))
+    a0.set_ylabel("lidar residual (mm)")
+    a0.legend(fontsize=8)
+    a0.grid(True, axis="y", alpha=0.3)
+    a1.bar(x, rep, 0.6, color=np.where(used, "#2b8a3e", "#bbb"))
+    a1.set_ylabel("reprojection (px)")
+    a1.grid(True, axis="y", alpha=0.3)
+    a1.set_xticks(x)
+    a1.set_xticklabels(names, rotation=60, ha="right", fontsize=7)
+    for k in np.flatnonzero(~np.array([bool(f.get("detected")) for f in frames])):
+        a1.text(k, 0, "no board", rotation=90, ha="center", va="bottom", fontsize=7, color="#c92a2a")
+    fig.tight_layout()
+    return _fig_uri(fig)

@@ -248,6 +248,10 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
              [[a, b, f"{d['rotation_deg']:.4f}", f"{d['translation_mm']:.2f}", " ".join(f"{v:+.2f}" for v in d["per_axis_mm"]),
                " ".join(f"{v:+.4f}" for v in d["per_axis_deg"])] for (a, b), d in table.differences.items()]))
 
+    target = inp.result.get("target")
+    if isinstance(target, dict) and target.get("frames"):
+        add(_target_section(target))
+
     # uncertainty
     add("<h2 id='uncertainty'>Uncertainty</h2>")
     urows = [[u.method, *[f"{v:.4g}" for v in u.std]] for u in unc]
@@ -334,6 +338,50 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>L2E calibration report</title>"
             f"<style>{CSS}</style></head><body>" + "\n".join(parts)
             + f"<script type='application/json' id='l2e-qa-data'>{blob}</script></body></html>\n")
+
+
+def _mm(v, nd=1) -> str:
+    return "-" if v is None else f"{1000.0 * float(v):.{nd}f}"
+
+
+def _target_section(target: dict) -> str:
+    """The checkerboard result's frames: detection, lidar board, residuals, used or left out and why,
+    how far leaving each out moves the result; the residual plot; the per-axis uncertainty."""
+    frames = target["frames"]
+    rows = []
+    for f in frames:
+        name = f.get("name")
+        cell = _Raw(f"<span class='held'>{_e(name)} (left out)</span>") if not f.get("used") else name
+        moved = ("-" if f.get("leave_out_moves_m") is None else
+                 f"{_mm(f['leave_out_moves_m'], 2)} mm / {_fmt(f.get('leave_out_moves_deg'), 4)} deg")
+        rows.append([cell, "yes" if f.get("detected") else "no", f.get("detector") or "-",
+                     _fmt(f.get("reprojection_px"), 2), f.get("lidar_points", 0), f.get("edge_points", 0),
+                     _mm(f.get("plane_rms_m")), _mm(f.get("plane_mean_m")), _mm(f.get("edge_rms_m")), moved,
+                     f.get("reason") or ""])
+    used = sum(bool(f.get("used")) for f in frames)
+    detected = sum(bool(f.get("detected")) for f in frames)
+    board = target.get("board") or {}
+    head = (f"<p class='small'>Board {_e(board.get('squares'))} squares of {_e(board.get('square_m'))} m, "
+            f"outer {_e(board.get('size_m'))} m. Board found in {detected} of {len(frames)} images; "
+            f"{used} frames used. Plane RMS over the used frames {_mm(target.get('plane_rms_m'))} mm, edge RMS "
+            f"{_mm(target.get('edge_rms_m'))} mm.</p>")
+    obs = target.get("observability") or {}
+    if obs:
+        cls = "ok" if obs.get("observed") else "warn"
+        add_obs = f"<div class='{cls}'>board orientations: {_e(obs.get('advice') or json.dumps(obs, default=str))}</div>"
+    else:
+        add_obs = ""
+    sigma = target.get("sigma") or {}
+    sig = (_tbl(["", "x (mm)", "y (mm)", "z (mm)", "rx (deg)", "ry (deg)", "rz (deg)"],
+                [["per-axis standard deviation (camera frame)", *[_mm(sigma.get(k), 2) for k in ("x_m", "y_m", "z_m")],
+                  *[_fmt(sigma.get(k), 4) for k in ("rx_deg", "ry_deg", "rz_deg")]]]) if sigma else "")
+    table = _tbl(["frame", "board", "detector", "reprojection (px)", "lidar points", "edge points", "plane RMS (mm)",
+                  "plane mean (mm)", "edge RMS (mm)", "left out, the result moves", "note"], rows)
+    fig = (f"<figure><img alt='checkerboard residuals per frame' src='{figures.target_residuals_figure(frames)}'>"
+           "<figcaption>Per frame: the lidar board points' RMS distance to the camera's board plane and the edge "
+           "points' distance to the board's outline (frames left out hatched grey), and the corners' "
+           "reprojection error.</figcaption></figure>")
+    return "<h2 id='target'>Checkerboard frames</h2>" + head + add_obs + table + fig + sig
 
 
 def _json_default(o):

@@ -13,6 +13,7 @@ import viser.uplot
 
 from ..context import Workbench
 from ...calibrate import METHODS, CalibrationSettings
+from ..runs import METHOD_NAMES
 from ..checks import Checked, check_rotation_bound, check_sigma, check_translation_bound, start_blocker
 from ..exact import format_value
 from ..pose import describe
@@ -34,6 +35,10 @@ class OptimisePanel:
         self.app = app
         gui = app.server.gui
         defaults = CalibrationSettings()
+        self.calibration = gui.add_dropdown("Method", METHOD_NAMES, initial_value=METHOD_NAMES[0],
+                                            hint="score climb: the paper's method, no target needed; checkerboard: "
+                                                 "the board of the Target tab in every frame (the settings below are "
+                                                 "the score climb's)")
         self.method = gui.add_dropdown("Optimiser", METHODS, initial_value=defaults.method,
                                        hint="SLSQP is fastest; L-BFGS-B and Powell are robust")
         # Text fields, checked on the server: a number box would clamp or drop what is typed.
@@ -76,7 +81,7 @@ class OptimisePanel:
         self.start.on_click(self._on_start)
         self.cancel.on_click(self._on_cancel)
         self.follow.on_update(lambda _: app.follow_changed(bool(self.follow.value)))
-        for handle in (self.t_bound, self.r_bound, self.sigma_in):
+        for handle in (self.t_bound, self.r_bound, self.sigma_in, self.calibration):
             handle.on_update(lambda _: self.check())
         self.check()
 
@@ -108,6 +113,9 @@ class OptimisePanel:
             problems = [c.problem for c in self.checked() if c.problem]
         snap = self.app.state.snapshot()
         reason = start_blocker(sum(snap.included), problems, snap.run.active, self.app.rebuilding())
+        if not reason and self.calibration.value == "checkerboard":
+            reason = self.app.target_problem()
+            reason = f"{reason} (Target tab)" if reason else ""
         self.start.disabled = bool(reason)
         self.blocker.content = f"Start is disabled: {reason}." if reason and not snap.run.active else ""
         self.blocker.visible = bool(self.blocker.content)
@@ -127,7 +135,7 @@ class OptimisePanel:
 
     def _on_start(self, event) -> None:
         try:
-            self.app.start_run(self.settings())
+            self.app.start_run(self.settings(), self.calibration.value)
         except (RuntimeError, ValueError) as exc:
             self.app.notify(event.client, "Cannot start", str(exc), color="red")
 
@@ -142,7 +150,8 @@ class OptimisePanel:
 
     def show_running(self, running: bool) -> None:
         self.cancel.disabled = not running
-        for handle in (self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only, self.coarse):
+        for handle in (self.calibration, self.method, self.t_bound, self.r_bound, self.sigma_in, self.rotation_only,
+                       self.coarse):
             handle.disabled = running
         self.progress.animated = running
         self.show_start()
@@ -160,7 +169,7 @@ class OptimisePanel:
         else:
             head = STATUS_WORDS[run.status]
         text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n"
-                f"objective {self.app.readout.label} {num(run.mi)} · best {num(run.best_mi)}")
+                f"objective {self.app.run_label()} {num(run.mi)} · best {num(run.best_mi)}")
         if run.error:
             text += f"  \n{run.error}"
         self.status.content = text

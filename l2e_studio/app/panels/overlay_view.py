@@ -178,7 +178,8 @@ class OverlayPanel:
         style = style or self.style()
         disp = self.app.displays[index]
         colors = disp.colors() if style.color_by == "intensity" else None
-        return render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
+        image = render_overlay(self.base_image(index, style), disp.scene.points, extrinsic, self.app.camera, style, colors)
+        return self.app.annotate(index, extrinsic, image, style.point_size)
 
     def render(self, snap: Snapshot, rest: bool = True) -> None:
         """Draw the overlay and send it within ``FRAME_BYTES``: at rest (``rest``) at the panel's

@@ -87,7 +87,7 @@ class ResultPanel:
                  else "✓ **Run finished**")
         label = score_label(r.objective)
         self.summary.content = (
-            f"{state} · {r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
+            f"{state} · {'checkerboard' if getattr(r, 'method', '') == 'target' else r.settings.method} · {r.evaluations} evaluations · {r.seconds:.1f} s  \n"
             + (verdict_text(v) + "  \n" if v is not None else "")
             + f"**{label} {num(r.score_seed)} → {num(r.score_result)}** "
             f"({num(r.score_result - r.score_seed, signed=True)}) over "

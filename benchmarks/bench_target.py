@@ -1,0 +1,154 @@
+"""Checkerboard calibration on the dev sets: seed spread, verdict, detection, modality agreement,
+distance to the references, half-splits against the reported sigma, and time.
+
+    PYTHONPATH=$PWD python benchmarks/bench_target.py [--realdata ../shared/realdata] [--runs 10] [--halves 10]
+
+Per set: ``--runs`` seeds 2 deg / 10 cm and as many 5 deg / 20 cm off the reference (uniform
+direction, that norm), the spread of the results (max distance to their median, mm / deg), how
+many were judged trusted, the share of frames with a detected board; the rles01 frame and event
+results against each other; each against reference.yaml and lcecalib_estimate.yaml;
+``--halves`` random halves of the frames: spread per axis against the sigma each half reported;
+the time for a whole run with detection, cold (no cache) and cached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.io.cameras import load_seed
+from l2e_studio.scenes import load_scene_folder
+from l2e_studio.target import calibrate_target, detect_frames, load_target
+from l2e_studio.target_verdict import judge_target
+
+SETS = ("lcecalib_rlfs01", "lcecalib_rles01_frame", "lcecalib_rles01_event")
+
+
+def offset_seed(ref: Extrinsic, deg: float, m: float, rng) -> Extrinsic:
+    a, b = rng.standard_normal(3), rng.standard_normal(3)
+    return ref.perturbed(m * a / np.linalg.norm(a), np.radians(deg) * b / np.linalg.norm(b))
+
+
+def correction(centre: Extrinsic, e: Extrinsic) -> np.ndarray:
+    dt, dw = centre.delta_to(e)
+    return np.concatenate([1000 * dt, np.degrees(dw)])  # mm, deg
+
+
+def spread(exts: list[Extrinsic]) -> tuple[float, float]:
+    """Largest distance of any result to the first (mm, deg)."""
+    d = [exts[0].error_to(e) for e in exts]
+    return 1000 * max(m for _, m in d), max(g for g, _ in d)
+
+
+def synthetic(count: int) -> None:
+    """Median error against the truth of ``count`` synthetic board sequences (10 poses each) per modality."""
+    from l2e_studio.cli import main as cli
+
+    print(f"== synthetic boards (l2e-studio synth --target checkerboard, 10 poses, {count} sequences per modality)")
+    with tempfile.TemporaryDirectory() as tmp:
+        for modality in ("frame", "e2vid", "events", "events-moving"):
+            errs, trusted, rates, fails = [], 0, [], []
+            for k in range(count):
+                out = Path(tmp) / f"{modality}{k}"
+                cli(["synth", "--target", "checkerboard", "--modality", modality, "--seed", str(k), "--out", str(out),
+                     "--quiet"])
+                ss = load_scene_folder(out)
+                truth, board = load_seed(out / "truth.yaml"), load_target(out / "target.yaml")
+                try:
+                    r = calibrate_target(ss.scenes, ss.camera, ss.seed, board)
+                except ValueError as exc:  # InputError: too few boards found
+                    fails.append(str(exc)[:80])
+                    continue
+                g, m = truth.error_to(r.extrinsic)
+                errs.append((1000 * m, g))
+                rates.append(r.target.detection_rate)
+                trusted += judge_target(r).status == "trusted"
+            med = np.median(np.array(errs), axis=0) if errs else (np.nan, np.nan)
+            print(f"   {modality}: median error {med[0]:.2f} mm / {med[1]:.3f} deg over {len(errs)} "
+                  f"(each: {', '.join(f'{a:.1f} mm {b:.2f} deg' for a, b in errs)}), trusted {trusted}/{count}, "
+                  f"detected {100 * np.mean(rates) if rates else 0:.0f} %" + (f"; failed: {fails}" if fails else ""))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--realdata", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "realdata")
+    ap.add_argument("--runs", type=int, default=10)
+    ap.add_argument("--halves", type=int, default=10)
+    ap.add_argument("--synthetic", type=int, default=3, help="synthetic sequences per modality (l2e-studio synth --target)")
+    args = ap.parse_args()
+    synthetic(args.synthetic)
+    results = {}
+    for name in SETS:
+        folder = args.realdata / name
+        ss = load_scene_folder(folder, seed_file=folder / "reference.yaml")
+        ref, est, board = ss.seed, load_seed(folder / "lcecalib_estimate.yaml"), load_target(folder / "target.yaml")
+        # cold: an empty cache folder
+        old = os.environ.get("XDG_CACHE_HOME")
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["XDG_CACHE_HOME"] = tmp
+            t = time.perf_counter()
+            calibrate_target(ss.scenes, ss.camera, ref, board)
+            cold = time.perf_counter() - t
+            t = time.perf_counter()
+            calibrate_target(ss.scenes, ss.camera, ref, board)
+            warm = time.perf_counter() - t
+        if old is None:
+            os.environ.pop("XDG_CACHE_HOME", None)
+        else:
+            os.environ["XDG_CACHE_HOME"] = old
+        dets = detect_frames(ss.scenes, ss.camera, board)
+        rate = sum(d.found for d in dets) / len(dets)
+        print(f"\n== {name}: {len(ss.scenes)} frames, board detected in {100 * rate:.0f} %  "
+              f"({', '.join(sorted({d.method for d in dets if d.found}))}); missed: "
+              f"{[d.name for d in dets if not d.found]}")
+        print(f"   time for all {len(ss.scenes)} frames incl. detection: cold {cold:.2f} s, cached {warm:.2f} s")
+        rng = np.random.default_rng(0)
+        all_ends = []
+        for deg, m in ((2.0, 0.10), (5.0, 0.20)):
+            ends, trusted = [], 0
+            for _ in range(args.runs):
+                r = calibrate_target(ss.scenes, ss.camera, offset_seed(ref, deg, m, rng), board, detections=dets)
+                ends.append(r.extrinsic)
+                trusted += judge_target(r).status == "trusted"
+            s_mm, s_deg = spread(ends)
+            all_ends += ends
+            print(f"   seeds {deg:g} deg / {100 * m:g} cm: spread {s_mm:.2f} mm / {s_deg:.4f} deg, trusted {trusted}/{args.runs}")
+        s_mm, s_deg = spread(all_ends)
+        print(f"   all {len(all_ends)} seeds: spread {s_mm:.2f} mm / {s_deg:.4f} deg")
+        r = calibrate_target(ss.scenes, ss.camera, ref, board, detections=dets)
+        v = judge_target(r)
+        results[name] = r.extrinsic
+        for label, other in (("reference.yaml", ref), ("lcecalib_estimate.yaml", est)):
+            g, mm = other.error_to(r.extrinsic)
+            print(f"   vs {label}: {100 * mm:.2f} cm / {g:.3f} deg")
+        print(f"   verdict {v.status}; sigma x y z {np.round(1000 * r.target.sigma_m, 2)} mm, "
+              f"rx ry rz {np.round(r.target.sigma_deg, 3)} deg; board RMS {1000 * r.target.plane_rms_m():.1f} mm, "
+              f"edges {1000 * r.target.edge_rms_m():.1f} mm")
+        for c in v.checks:
+            print(f"     [{'x' if c.passed else ' '}] {c.name}: {c.detail}")
+        names = [sc.name for sc in ss.scenes]
+        corr, sig = [], []
+        for _ in range(args.halves):
+            keep = set(rng.choice(names, len(names) // 2, replace=False))
+            h = calibrate_target(ss.scenes, ss.camera, ref, board, exclude=set(names) - keep, detections=dets)
+            corr.append(correction(r.extrinsic, h.extrinsic))
+            sig.append(np.concatenate([1000 * h.target.sigma_m, h.target.sigma_deg]))
+        corr, sig = np.array(corr), np.array(sig)
+        sd = corr.std(axis=0, ddof=1)
+        rep = np.median(sig, axis=0)
+        print("   half-splits: spread (std) x y z mm " + " ".join(f"{v:.2f}" for v in sd[:3]) +
+              ", rx ry rz deg " + " ".join(f"{v:.3f}" for v in sd[3:]))
+        print("                reported sigma / spread " + " ".join(f"{a / b:.2f}" for a, b in zip(rep, sd)))
+    if "lcecalib_rles01_frame" in results and "lcecalib_rles01_event" in results:
+        g, m = results["lcecalib_rles01_frame"].error_to(results["lcecalib_rles01_event"])
+        print(f"\nrles01 frame vs event: {100 * m:.2f} cm / {g:.3f} deg (LCE-Calib's own: 2.8-4.0 cm / 0.6-1.2 deg)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,206 @@
+"""Runs: one calibration at a time, in a thread of its own, whatever the method.
+
+A :class:`Method` says what a run does (solve from a seed over the included scenes) and how its
+answer is judged. The :class:`Runner` owns the rest, the same for every method: the thread, the
+cancel flag, the 5 Hz progress ticker, the judging step and the end of a run (Result tab,
+before/after, notification). The score climb is :func:`targetless`; another method (the
+checkerboard solve) is another :class:`Method`, not a second pipeline.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from ..calibrate import CalibrationResult, CalibrationSettings, Progress, calibrate
+from ..geometry import Extrinsic
+from ..verdict import Verdict, judge
+from .text import num, score_label
+from .workers import Ticker
+
+if TYPE_CHECKING:
+    from typing import Sequence
+
+    from ..camera import CameraModel
+    from ..objective import SceneStack
+    from ..scenes import Scene
+    from .server import App
+
+log = logging.getLogger(__name__)
+
+PROGRESS_PERIOD = 0.2  # s; GUI updates during a run are throttled to 5 Hz
+
+OnProgress = Callable[[Progress], None]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One way to calibrate. ``solve(stack, seed, on_progress, cancel)`` returns the result over
+    the included scenes (``stack``); ``judge(stack, result, cancel)`` its verdict, or None when it
+    cannot be judged. ``judging`` is the status line shown while the verdict is computed."""
+
+    name: str
+    solve: Callable[["SceneStack", Extrinsic, OnProgress, threading.Event], CalibrationResult]
+    judge: Callable[["SceneStack", CalibrationResult, threading.Event], Verdict | None]
+    judging: str = "Judging the result..."
+    label: str = ""  # the score's name in the progress line ("": the readout's)
+
+
+#: The methods the Optimise tab offers (:func:`targetless`, :func:`checkerboard`).
+METHOD_NAMES = ("score climb (targetless)", "checkerboard")
+
+
+def targetless(settings: CalibrationSettings) -> Method:
+    """The paper's method: maximise the score over all included scenes, then judge the result."""
+
+    def solve(stack: "SceneStack", seed: Extrinsic, on_progress: OnProgress, cancel: threading.Event) -> CalibrationResult:
+        return calibrate(stack, None, seed, settings, on_progress, cancel)
+
+    def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event) -> Verdict | None:
+        return judge(stack, result, settings, cancel=cancel)
+
+    return Method("Optimisation", solve, judge_it,
+                  "Judging the result: halves, a second start, a second score...")
+
+
+def checkerboard(scenes: "Sequence[Scene]", camera: "CameraModel", board, detections: list | None = None) -> Method:
+    """The target method: the board in every included frame's image and scan, all frames solved
+    together (:func:`l2e_studio.target.calibrate_target`), judged by
+    :func:`l2e_studio.target_verdict.judge_target`. Frames left out of the run (the scenes not
+    included) are still detected and listed, marked as left out by the user. ``detections``:
+    the Target tab's, when they are of this board (else the run detects, from the cache)."""
+    from ..target import calibrate_target
+
+    def solve(stack: "SceneStack", seed: Extrinsic, on_progress: OnProgress, cancel: threading.Event) -> CalibrationResult:
+        included = set(stack.names)
+        exclude = [sc.name for sc in scenes if sc.name not in included]
+        return calibrate_target(scenes, camera, seed, board, exclude=exclude, on_progress=on_progress, cancel=cancel,
+                                detections=detections)
+
+    def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event) -> Verdict | None:
+        from ..target_verdict import judge_target
+
+        return judge_target(result)
+
+    return Method("Checkerboard calibration", solve, judge_it,
+                  "Judging the result: residuals against the sensors' noise, leave-one-frame-out, board orientations...",
+                  label="−board plane RMS (mm)")
+
+
+class Runner:
+    """Starts, cancels and finishes the workbench's runs (one at a time)."""
+
+    def __init__(self, app: "App") -> None:
+        self.app = app
+        self._cancel: threading.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ticker: Ticker | None = None
+        self._method: Method | None = None
+
+    def start(self, method: Method) -> int:
+        """Start ``method`` on the included scenes from the current extrinsic (RuntimeError while
+        event maps are being rebuilt)."""
+        app = self.app
+        with app.ui_lock:
+            if app.rebuilding():
+                raise RuntimeError("event maps are being rebuilt; start when that is done")
+            run_id = app.state.begin_run()
+            maps = {sc.name: sc.map_record() for sc in app.scene_set.scenes}
+        snap = app.state.snapshot()
+        cancel = threading.Event()
+        self._cancel, self._method = cancel, method
+
+        def on_progress(p: Progress) -> None:
+            app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
+
+        def work() -> None:
+            try:
+                # the readout's stack already holds every scene: no second load or stacking
+                stack = app.readout.stack.subset(np.asarray(snap.included, dtype=bool))
+                result = method.solve(stack, snap.extrinsic, on_progress, cancel)
+                app.result_maps = maps
+                app.state.finish_run(run_id, result, verdict=self._judge(method, stack, result, cancel))
+            except Exception as exc:  # shown to the user; the app keeps running
+                log.exception("%s failed", method.name.lower())
+                app.state.finish_run(run_id, error=f"{type(exc).__name__}: {exc}")
+            self._finished()
+
+        app.optimise.show_running(True)
+        app.event_maps.check()  # Rebuild waits for the run's end
+        self._ticker = Ticker("progress", self._push_progress, lambda: app.state.snapshot().run.active, PROGRESS_PERIOD)
+        self._thread = threading.Thread(target=work, name="l2e-calibrate", daemon=True)
+        self._thread.start()
+        return run_id
+
+    def _judge(self, method: Method, stack: "SceneStack", result: CalibrationResult,
+               cancel: threading.Event) -> Verdict | None:
+        """The verdict on a finished run (none for a cancelled one: it is not an answer)."""
+        if result.cancelled:
+            return None
+        self.app.optimise.show_status(method.judging)
+        try:
+            verdict = method.judge(stack, result, cancel)
+        except Exception:  # the result stands without a verdict rather than being lost
+            log.exception("judging the result failed")
+            return None
+        return None if cancel.is_set() else verdict
+
+    def label(self) -> str:
+        """The score's name of the last run started ("" for the readout's)."""
+        return self._method.label if self._method is not None else ""
+
+    def cancel(self) -> bool:
+        """Ask the running calibration to stop (it returns its best point so far)."""
+        if self._cancel is None or not self.app.state.snapshot().run.active:
+            return False
+        self._cancel.set()
+        self.app.optimise.show_progress(self.app.state.snapshot().run)  # "Cancelling..." at once
+        return True
+
+    def cancel_requested(self) -> bool:
+        """True once Cancel was pressed for the run in progress."""
+        return self._cancel is not None and self._cancel.is_set() and self.app.state.snapshot().run.active
+
+    def wait(self, timeout: float = 60.0) -> bool:
+        """Wait up to ``timeout`` s for the run to end; True when none is running."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout)
+            return not t.is_alive()
+        return True
+
+    def _push_progress(self) -> None:
+        snap = self.app.state.snapshot()
+        self.app.optimise.show_progress(snap.run)
+        if snap.follow_best:
+            self.app.overlay_worker.poke()
+
+    def _finished(self) -> None:
+        app = self.app
+        if self._ticker is not None:
+            self._ticker.stop(2.0)
+        snap = app.state.snapshot()
+        app.optimise.show_progress(snap.run)
+        app.optimise.show_running(False)
+        app.event_maps.check()
+        app.result_shown(snap)
+        run = snap.run
+        name = self._method.name if self._method is not None else "Run"
+        if run.status == "failed":
+            app.notify_all(f"{name} failed", run.error, color="red")
+        elif snap.result is not None:
+            r: CalibrationResult = snap.result
+            verb = "cancelled" if r.cancelled else "finished"
+            v = snap.verdict
+            app.notify_all(
+                f"{name} {verb}",
+                f"{score_label(r.objective)} {num(r.score_seed)} -> {num(r.score_result)} after {r.evaluations} "
+                f"evaluations ({r.seconds:.1f} s)." + (f" Verdict: {v.summary()}." if v is not None else "")
+                + " See the Result tab and Before / after.",
+                color="yellow" if r.cancelled or (v is not None and v.status == "trusted-rotation")
+                else "red" if v is not None and not v.trusted else "green",
+            )

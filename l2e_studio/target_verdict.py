@@ -1,0 +1,108 @@
+"""The verdict on a checkerboard calibration, and the board as evidence on any calibration.
+
+:func:`judge_target` turns a :func:`l2e_studio.target.calibrate_target` result into the same
+:class:`l2e_studio.verdict.Verdict` every method gets. ``trusted`` only when all hold:
+
+* **residuals consistent with the sensors' noise**: the board points' RMS distance to the
+  camera's planes and the edge points' RMS distance to the outline are within what lidar range
+  noise and the board's per-frame camera error explain (``NOISE_PLANE_M``, ``NOISE_EDGE_M``),
+  and the corners reproject within ``NOISE_REPROJECTION_PX``;
+* **leave-one-frame-out stability**: no single frame moves the result by more than
+  ``LOO_M`` / ``LOO_DEG`` when it alone is left out;
+* **every axis pinned**: enough boards of different orientation (the board normals' RMS
+  component along their weakest direction); when not, the check names the unobserved direction
+  and the pose to add;
+* at least ``MIN_USED`` frames used.
+
+Otherwise ``not-trusted`` (the seed is handed back unless the caller asks to keep the result).
+:func:`board_check` judges ANY extrinsic (e.g. a targetless result) against boards in view.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .calibrate import CalibrationResult
+from .geometry import Extrinsic
+from .target import Board, TargetFrame, frame_residuals
+from .verdict import ON_UNTRUSTED, Check, Verdict
+
+NOISE_PLANE_M = 0.03  # RMS point-to-plane: VLP-16 range noise (~1-2 cm) + the camera's board depth error
+NOISE_EDGE_M = 0.03  # RMS edge-to-outline: azimuth step, beam width, mixed returns
+NOISE_REPROJECTION_PX = 1.0  # RMS corner reprojection (px)
+LOO_M, LOO_DEG = 0.01, 0.2  # the most one frame may move the result
+MIN_USED = 6
+BOARD_CHECK_M = 0.03  # a calibration whose board points sit further (RMS) off the camera's planes fails the board check
+
+
+class TargetVerdict(Verdict):
+    """A :class:`Verdict` whose summary speaks of boards (same fields, same type)."""
+
+    def summary(self) -> str:
+        if self.status == "trusted":
+            return ("trusted: board residuals within the sensors' noise, stable when any frame is left out, "
+                    "every axis pinned by the board orientations")
+        return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")
+
+
+def judge_target(result: CalibrationResult, on_untrusted: str = "keep-seed") -> Verdict:
+    """Judge a target calibration (``result.target`` must be set) on the checks in the module docstring."""
+    if on_untrusted not in ON_UNTRUSTED:
+        raise ValueError(f"on_untrusted must be one of {', '.join(ON_UNTRUSTED)}")
+    detail = result.target
+    if detail is None:
+        raise ValueError("not a target calibration (result.target is None)")
+    t0 = time.perf_counter()
+    used = detail.used
+    checks = [Check("frames used", len(used) >= MIN_USED,
+                    f"{len(used)} of {len(detail.frames)} frames used (at least {MIN_USED})")]
+    plane, edge = detail.plane_rms_m(), detail.edge_rms_m()
+    reps = [f.detection.reprojection_px for f in used]
+    rep = float(np.sqrt(np.mean(np.square(reps)))) if reps else float("nan")
+    rep_limit = NOISE_REPROJECTION_PX
+    ok = bool(plane <= NOISE_PLANE_M and (not np.isfinite(edge) or edge <= NOISE_EDGE_M) and rep <= rep_limit)
+    checks.append(Check("residuals within sensor noise", ok,
+                        f"board points {100 * plane:.1f} cm RMS off the camera's planes (limit {100 * NOISE_PLANE_M:.0f}), "
+                        f"edge points {100 * edge:.1f} cm off the outline (limit {100 * NOISE_EDGE_M:.0f}), "
+                        f"corners reproject {rep:.2f} px RMS (limit {rep_limit:.1f})"))
+    loo = [(f.loo_m, f.loo_deg, f.name) for f in used if np.isfinite(f.loo_m)]
+    if loo:
+        worst_m = max(loo)
+        worst_deg = max(loo, key=lambda x: x[1])
+        checks.append(Check("leave one frame out", worst_m[0] <= LOO_M and worst_deg[1] <= LOO_DEG,
+                            f"leaving one frame out moves the result at most {1000 * worst_m[0]:.1f} mm "
+                            f"({worst_m[2]}) and {worst_deg[1]:.3f} deg ({worst_deg[2]}) "
+                            f"(limits {1000 * LOO_M:.0f} mm, {LOO_DEG:g} deg)"))
+    else:
+        checks.append(Check("leave one frame out", False, "not computed (too few frames, or switched off)"))
+    obs = detail.observability
+    checks.append(Check("every axis pinned", obs.observed,
+                        f"board normals vary by {np.degrees(np.arcsin(min(obs.spread, 1.0))):.1f} deg RMS along their "
+                        f"weakest direction" + (f"; {obs.advice}" if obs.advice else "")))
+    failed = [c for c in checks if not c.passed]
+    reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
+    if not failed and not result.cancelled:
+        return TargetVerdict("trusted", result.extrinsic, False, (), tuple(checks), time.perf_counter() - t0)
+    if result.cancelled:
+        reasons += ("the run was cancelled",)
+    keep = on_untrusted == "keep-seed"
+    return TargetVerdict("not-trusted", result.seed if keep else result.extrinsic, keep, reasons, tuple(checks),
+                         time.perf_counter() - t0)
+
+
+def board_check(extrinsic: Extrinsic, frames: list[TargetFrame], board: Board, limit_m: float = BOARD_CHECK_M) -> Check:
+    """Whether ``extrinsic`` puts the lidar's board points on the camera's board planes (RMS over
+    all frames within ``limit_m``): evidence a targetless optimiser never climbed. ``frames``:
+    :func:`l2e_studio.target.board_frames` of the scenes."""
+    if not frames:
+        return Check("boards agree", False, "no frame with the board found in both sensors")
+    res = [frame_residuals(extrinsic, f, board) for f in frames]
+    n = sum(r.n_points for r in res)
+    rms = float(np.sqrt(sum(r.plane_rms_m**2 * r.n_points for r in res) / n))
+    worst = max(zip(res, frames), key=lambda rf: abs(rf[0].plane_mean_m))
+    return Check("boards agree", rms <= limit_m,
+                 f"the lidar's board points lie {100 * rms:.1f} cm RMS off the camera's board planes over "
+                 f"{len(frames)} frames (limit {100 * limit_m:.0f} cm; worst frame {worst[1].name}: "
+                 f"{100 * worst[0].plane_mean_m:+.1f} cm)")

@@ -1,0 +1,280 @@
+"""The checkerboard method: board files, detection, lidar board, solver and CLI on real arrays and files."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from l2e_studio.camera import CameraModel
+from l2e_studio.errors import InputError
+from l2e_studio.geometry import Extrinsic, project_points
+from l2e_studio.target import (Board, TargetFrame, board_pose, closed_form, crop_board, detect_board, load_target,
+                               observability, search_board, solve)
+from l2e_studio.target.detect import undistort_normalised
+from l2e_studio.target_verdict import board_check
+
+from conftest import REALDATA
+
+BOARD = Board("checkerboard", (9, 7), 0.07, (0.767, 0.626))
+CAM = CameraModel(np.array([[900.0, 0, 640], [0, 900, 360], [0, 0, 1]]), 1280, 720, np.array([-0.3, 0.1, 0.001, 0.0005, 0.0]))
+TRUTH = Extrinsic.from_rpy([-90.0, 0.5, -91.0], [0.05, -0.07, -0.09])  # lidar x forward -> camera z forward
+
+
+def _realdata() -> Path | None:
+    for base in (REALDATA, Path(os.environ.get("L2E_REALDATA", "/nonexistent"))):
+        if (base / "lcecalib_rlfs01").is_dir():
+            return base
+    return None
+
+
+def board_poses(n: int, rng) -> list[Extrinsic]:
+    """Boards 1.5-3 m ahead of the camera, turned up to 30 deg about each in-plane axis."""
+    out = []
+    for _ in range(n):
+        rpy = np.concatenate([rng.uniform(-30, 30, 2), rng.uniform(-20, 20, 1)])
+        t = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), rng.uniform(1.5, 3.0)])
+        out.append(Extrinsic.from_rpy(rpy, t))
+    return out
+
+
+def lidar_board(pose: Extrinsic, truth: Extrinsic, rng, noise: float = 0.01, rows: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the board (lidar frame) sampled along ``rows`` horizontal lines, with range noise; and the ring ends."""
+    w, h = BOARD.size_m[0] / 2, BOARD.size_m[1] / 2
+    pts, edges = [], []
+    to_lidar = truth.inverse().compose(pose)  # board -> lidar
+    for y in np.linspace(-0.85 * h, 0.85 * h, rows):
+        x = np.linspace(-w, w, 60)
+        q = np.column_stack([x, np.full_like(x, y), np.zeros_like(x)])
+        p = to_lidar.transform(q)
+        p += noise * rng.standard_normal(len(p))[:, None] * p / np.linalg.norm(p, axis=1, keepdims=True)
+        pts.append(p)
+        edges.extend([p[0], p[-1]])
+    return np.vstack(pts), np.array(edges)
+
+
+def test_board_file_good_and_bad(tmp_path):
+    good = tmp_path / "target.yaml"
+    good.write_text("target:\n  kind: checkerboard\n  squares: [10, 7]\n  square_m: 0.068\n  size_m: [0.8, 0.6]\n")
+    b = load_target(good)
+    assert b.inner == (9, 6) and b.size_m == (0.8, 0.6)
+    assert np.allclose(b.corners().mean(axis=0), 0) and b.corners().shape == (54, 3)
+    for text, words in [("target:\n  kind: circles\n  squares: [4, 5]\n  square_m: 0.1\n", "kind"),
+                        ("target:\n  kind: checkerboard\n  squares: [10]\n  square_m: 0.1\n", "squares"),
+                        ("target:\n  kind: checkerboard\n  squares: [10, 7]\n  square_m: -1\n", "square_m"),
+                        ("target:\n  kind: checkerboard\n  squares: [10, 7]\n  square_m: 0.1\n  size_m: [0.5, 0.5]\n",
+                         "smaller than the printed grid"),
+                        ("target: [unclosed\n", "YAML")]:
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(text)
+        with pytest.raises(InputError) as exc:
+            load_target(bad)
+        msg = str(exc.value)
+        assert str(bad) in msg and words in msg and "\n" not in msg
+
+
+def render_board(pose: Extrinsic, camera: CameraModel, board: Board) -> np.ndarray:
+    """A grey image of the board at ``pose`` through the camera's lens (white margin, black squares)."""
+    h, w = camera.height, camera.width
+    img = np.full((h, w), 90, np.uint8)
+    s = 0.005
+    xs = np.arange(-board.size_m[0] / 2, board.size_m[0] / 2, s) + s / 2
+    ys = np.arange(-board.size_m[1] / 2, board.size_m[1] / 2, s) + s / 2
+    X, Y = np.meshgrid(xs, ys)
+    gx = np.floor((X + board.squares[0] * board.square_m / 2) / board.square_m)
+    gy = np.floor((Y + board.squares[1] * board.square_m / 2) / board.square_m)
+    inside = (gx >= 0) & (gx < board.squares[0]) & (gy >= 0) & (gy < board.squares[1])
+    val = np.where(inside & ((gx + gy) % 2 == 0), 20, 235).astype(np.uint8)
+    uv, _ = project_points(pose.transform(np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])), camera)
+    # splat at 4x and average down: a sharp but anti-aliased board
+    big = np.zeros((h * 4, w * 4), np.float32)
+    cnt = np.zeros_like(big)
+    ui, vi = np.round(uv[:, 0] * 4 + 1.5).astype(int), np.round(uv[:, 1] * 4 + 1.5).astype(int)
+    ok = (ui >= 0) & (ui < w * 4) & (vi >= 0) & (vi < h * 4)
+    np.add.at(big, (vi[ok], ui[ok]), val.ravel()[ok])
+    np.add.at(cnt, (vi[ok], ui[ok]), 1)
+    big = cv2.dilate(big, np.ones((5, 5))), cv2.dilate(cnt, np.ones((5, 5)))
+    sm = cv2.resize(big[0], (w, h), interpolation=cv2.INTER_AREA) / np.maximum(cv2.resize(big[1], (w, h), interpolation=cv2.INTER_AREA), 1e-6)
+    mask = cv2.resize(big[1], (w, h), interpolation=cv2.INTER_AREA) > 0
+    img[mask] = np.clip(sm[mask], 0, 255).astype(np.uint8)
+    return img
+
+
+def test_undistort_inverts_the_lens_model():
+    for cam in (CAM, CameraModel(CAM.K, 1280, 720, np.array([0.05, -0.01, 0.002, -0.001]), "equidistant")):
+        xy = np.random.default_rng(0).uniform(-0.6, 0.4, (200, 2))
+        uv, _ = project_points(np.column_stack([xy, np.ones(len(xy))]), cam)
+        assert np.abs(undistort_normalised(uv, cam) - xy).max() < 1e-9
+
+
+def test_detects_a_rendered_board_and_recovers_its_pose():
+    pose = Extrinsic.from_rpy([15.0, -20.0, 5.0], [0.1, -0.05, 2.0])
+    det = detect_board(render_board(pose, CAM, BOARD), BOARD, CAM, "f0")
+    assert det.found, det.reason
+    assert det.reprojection_px < 0.5
+    # the plane (normal, offset) does not depend on the 180 deg ordering ambiguity
+    n_true = -pose.R[:, 2]
+    assert np.degrees(np.arccos(abs(det.normal @ n_true))) < 0.5
+    assert abs(det.plane[1] - n_true @ pose.translation) < 0.01
+
+
+def test_frame_without_board_is_listed_with_reason():
+    blank = np.random.default_rng(1).integers(0, 255, (CAM.height, CAM.width)).astype(np.uint8)
+    det = detect_board(blank, BOARD, CAM, "empty")
+    assert not det.found and "no 8x6 inner-corner grid" in det.reason and det.pose is None
+
+
+def test_solver_recovers_a_known_extrinsic_from_any_seed():
+    rng = np.random.default_rng(3)
+    frames = []
+    for i, pose in enumerate(board_poses(12, rng)):
+        pts, edges = lidar_board(pose, TRUTH, rng)
+        frames.append(TargetFrame(f"f{i}", pose, pts, edges))
+    ends = []
+    for k in range(4):
+        seed = TRUTH.perturbed(rng.uniform(-1, 1, 3) * 0.2 / np.sqrt(3), np.radians(rng.uniform(-1, 1, 3) * 5 / np.sqrt(3)))
+        start = closed_form(frames, seed)
+        assert TRUTH.error_to(start)[0] < 2.0
+        ends.append(solve(frames, BOARD, start).extrinsic)
+    for e in ends:
+        deg, m = TRUTH.error_to(e)
+        assert deg < 0.2 and m < 0.005, (deg, m)
+        assert ends[0].error_to(e)[0] < 1e-4 and ends[0].error_to(e)[1] < 1e-5
+    sol = solve(frames, BOARD, ends[0])
+    assert np.all(sol.sigma_m > 0) and np.all(sol.sigma_m < 0.01) and np.all(sol.sigma_deg < 0.2)
+    assert observability(frames).observed
+    assert board_check(sol.extrinsic, frames, BOARD).passed
+    assert not board_check(TRUTH.perturbed([0.1, 0, 0.1], [0, 0.05, 0]), frames, BOARD).passed
+
+
+def test_parallel_boards_name_the_unobserved_direction():
+    rng = np.random.default_rng(4)
+    frames = []
+    for i in range(6):
+        pose = Extrinsic.from_rpy([0, 0, 0], [rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3), rng.uniform(1.5, 3)])
+        pts, edges = lidar_board(pose, TRUTH, rng)
+        frames.append(TargetFrame(f"f{i}", pose, pts, edges))
+    obs = observability(frames)
+    assert not obs.observed and "nearly parallel" in obs.advice and "add a pose" in obs.advice
+
+
+def test_lidar_board_found_beside_a_wall_and_a_floor_from_an_offset_seed():
+    rng = np.random.default_rng(5)
+    pose = Extrinsic.from_rpy([10.0, 25.0, 0.0], [0.2, 0.0, 2.2])
+    pts, _ = lidar_board(pose, TRUTH, rng, rows=10)
+    wall = np.column_stack([np.full(6000, 4.5), rng.uniform(-3, 3, 6000), rng.uniform(-1.5, 1.5, 6000)])
+    floor = np.column_stack([rng.uniform(0.5, 4.5, 6000), rng.uniform(-3, 3, 6000), np.full(6000, -1.2)])
+    person = np.column_stack([rng.normal(2.5, 0.1, 800), rng.normal(-0.2, 0.1, 800), rng.uniform(-1.2, 0.6, 800)])
+    scan = np.vstack([pts, wall, floor, person])
+    rings = np.concatenate([np.repeat(np.arange(10), 60), np.full(len(scan) - len(pts), 99)])
+    from l2e_studio.target import Detection
+
+    det = Detection("f", True, "", np.zeros((48, 2)), pose, 0.1, "test")
+    seed = TRUTH.perturbed([0.12, -0.1, 0.12], np.radians([3.0, -3.0, 2.0]))
+    found = search_board(scan, rings, det, BOARD, seed)
+    assert found.found, found.reason
+    assert set(found.indices) <= set(range(len(pts))) and found.n_points > 0.9 * len(pts)
+    cropped = crop_board(scan, rings, det, BOARD, TRUTH)
+    assert cropped.found and set(cropped.indices) <= set(range(len(pts)))
+    assert len(found.edges) == 2 * 10
+
+
+realdata = pytest.mark.realdata
+
+
+@realdata
+def test_real_checkerboard_sequence_is_calibrated_and_trusted(tmp_path):
+    base = _realdata()
+    if base is None:
+        pytest.skip("../shared/realdata not present")
+    from l2e_studio.io.cameras import load_seed
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.target import calibrate_target
+    from l2e_studio.target_verdict import judge_target
+
+    folder = base / "lcecalib_rlfs01"
+    ss = load_scene_folder(folder, seed_file=folder / "reference.yaml")
+    ref, est = ss.seed, load_seed(folder / "lcecalib_estimate.yaml")
+    seed = ref.perturbed([0.1, -0.1, 0.1], np.radians([-3.0, 3.0, -2.0]))
+    res = calibrate_target(ss.scenes, ss.camera, seed, load_target(folder / "target.yaml"), exclude={"00003"})
+    d = res.target
+    assert res.method == "target" and d.detection_rate >= 0.9
+    assert [f.reason for f in d.frames if f.name == "00003"] == ["left out by the user"]
+    deg, m = ref.error_to(res.extrinsic)
+    assert deg < 0.5 and m < 0.03
+    assert est.error_to(res.extrinsic)[1] < 0.02
+    assert judge_target(res).status == "trusted"
+
+
+@realdata
+def test_cli_target_writes_the_target_section(tmp_path):
+    base = _realdata()
+    if base is None:
+        pytest.skip("../shared/realdata not present")
+    import yaml
+
+    from l2e_studio.cli import main
+
+    folder = base / "lcecalib_rles01_frame"
+    out = tmp_path / "r.yaml"
+    assert main(["calibrate", "--scenes", str(folder), "--seed", str(folder / "lcecalib_estimate.yaml"),
+                 "--out", str(out), "--quiet"]) == 0
+    doc = yaml.safe_load(out.read_text())
+    assert doc["method"] == "target" and doc["target"]["frames_total"] == 19
+    assert set(doc["target"]["sigma"]) == {"x_m", "y_m", "z_m", "rx_deg", "ry_deg", "rz_deg"}
+    assert {"detected", "reprojection_px", "lidar_points", "plane_rms_m", "edge_rms_m", "used", "reason"} <= set(
+        doc["target"]["frames"][0])
+
+
+def test_cli_bad_target_is_one_line(tmp_path, small_synth_dir, capsys):
+    from l2e_studio.cli import main
+
+    bad = tmp_path / "target.yaml"
+    bad.write_text("kind: checkerboard\nsquares: [9]\nsquare_m: 0.07\n")
+    assert main(["calibrate", "--scenes", str(small_synth_dir), "--target", str(bad), "--out", str(tmp_path / "r.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(bad) in err[0] and "squares" in err[0]
+    assert not (tmp_path / "r.yaml").exists()
+
+
+@pytest.fixture(scope="module")
+def synth_boards(tmp_path_factory) -> Path:
+    """A synthetic checkerboard sequence with a known answer (``l2e-studio synth --target checkerboard``)."""
+    from l2e_studio.cli import main
+
+    out = tmp_path_factory.mktemp("boards") / "seq"
+    assert main(["synth", "--target", "checkerboard", "--seed", "2", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_synthetic_sequence_end_to_end_with_exclusion_progress_and_cancel(synth_boards):
+    import threading
+
+    from l2e_studio.io.cameras import load_seed
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.target import calibrate_target, find_target
+    from l2e_studio.target_verdict import judge_target
+
+    ss = load_scene_folder(synth_boards)
+    truth, board = load_seed(synth_boards / "truth.yaml"), load_target(find_target(synth_boards))
+    seen = []
+    res = calibrate_target(ss.scenes, ss.camera, ss.seed, board, on_progress=seen.append)
+    deg, m = truth.error_to(res.extrinsic)
+    assert deg < 0.3 and m < 0.01, (deg, m)
+    assert ss.seed.error_to(truth)[0] > deg  # better than the seed it started from
+    assert {p.stage for p in seen} == {0, 1, 2} and seen[-1].fraction == 1.0
+    assert judge_target(res).status == "trusted"
+    # a frame left out by the user: reported, not used, and the answer changes
+    name = ss.scenes[0].name
+    res2 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, exclude={name})
+    rec = next(f for f in res2.target.frames if f.name == name)
+    assert not rec.used and rec.reason == "left out by the user" and rec.detected
+    assert res2.extrinsic.error_to(res.extrinsic)[1] > 1e-6
+    # cancelled before anything: the seed, marked cancelled
+    stop = threading.Event()
+    stop.set()
+    res3 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, cancel=stop)
+    assert res3.cancelled and res3.extrinsic is ss.seed and judge_target(res3).status == "not-trusted"
