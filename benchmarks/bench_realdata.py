@@ -44,8 +44,30 @@ def classify(seed_err: tuple[float, float], end_err: tuple[float, float]) -> str
     return "closer" if dr < -0.1 or dt < -0.01 else "kept"
 
 
-def run_rig(rig, runs: int, levels, variants) -> list[dict]:
+def board_evidence(rig):
+    """For a rig with a checkerboard in view: ``check(verdict, seed) -> verdict`` adding the
+    boards' agreement with what the verdict hands back (target_verdict.board_check); else None."""
+    if rig.board is None:
+        return None
+    from l2e_studio.target import board_frames, detect_frames, load_target
+    from l2e_studio.target_verdict import board_check
+    from l2e_studio.verdict import with_check
+
+    board = load_target(rig.board)
+    found = detect_frames(rig.scenes, rig.camera, board, use_cache=False)
+
+    def check(v, seed):
+        if not v.trusted:
+            return v
+        frames = board_frames(rig.scenes, rig.camera, board, v.extrinsic, detections=found, use_cache=False)
+        return with_check(v, board_check(v.extrinsic, frames, board), seed)
+
+    return check
+
+
+def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict]:
     rows = []
+    with_boards = board_evidence(rig) if boards and "new" in variants else None
     wide = CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0)
     for variant in variants:
         settings = CalibrationSettings(objective="mi", global_search=False) if variant == "mi" else CalibrationSettings()
@@ -61,6 +83,8 @@ def run_rig(rig, runs: int, levels, variants) -> list[dict]:
                 status, end = "-", result.extrinsic
                 if variant == "new":
                     v = judge(stack, result, settings)
+                    if with_boards is not None:
+                        v = with_boards(v, seed)
                     status, end = v.status, v.extrinsic
                 seconds = time.perf_counter() - t0
                 se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
@@ -134,6 +158,8 @@ def main() -> None:
     p.add_argument("--levels", default="1,2,5,0", help="seed levels: 1 (1 deg / 5 cm), 2, 5, 0 (the reference)")
     p.add_argument("--variants", default="mi,new")
     p.add_argument("--sweeps", action="store_true")
+    p.add_argument("--boards", action="store_true",
+                   help="rigs with a target.yaml: the boards in view must agree with a trusted result")
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     args = p.parse_args()
@@ -151,7 +177,7 @@ def main() -> None:
     levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows = []
     for rig in rigs if levels else ():
-        rows += run_rig(rig, args.runs, levels, args.variants.split(","))
+        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards)
         if args.save:
             args.save.write_text(json.dumps(rows, indent=1))
     print(table(rows))

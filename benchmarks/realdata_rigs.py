@@ -33,6 +33,7 @@ class Rig:
     camera: CameraModel
     reference: Extrinsic
     scenes: tuple[Scene, ...]
+    board: Path | None = None  # the folder's target.yaml, when a checkerboard is in view
 
 
 def _image(folder: Path) -> Path:
@@ -78,7 +79,8 @@ def load_rigs(names: list[str] | None = None) -> list[Rig]:
     for name in FOLDERS:
         if name in want and (REALDATA / name / "reference.yaml").is_file():
             folder = load_scene_folder(REALDATA / name, REALDATA / name / "reference.yaml", use_cache=False)
-            rigs.append(Rig(name, folder.camera, folder.seed, tuple(folder.scenes)))
+            board = REALDATA / name / "target.yaml"
+            rigs.append(Rig(name, folder.camera, folder.seed, tuple(folder.scenes), board if board.is_file() else None))
     return rigs
 
 

@@ -329,6 +329,18 @@ def judge(
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes)
 
 
+def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: str = "keep-seed") -> Verdict:
+    """``verdict`` with one more piece of outside evidence (e.g. the boards in view,
+    :func:`l2e_studio.target_verdict.board_check` of what the verdict hands back): a failed
+    check makes a trusted result ``not-trusted``, the seed handed back (or the result marked)."""
+    checks = verdict.checks + (check,)
+    if check.passed or not verdict.trusted:
+        return replace(verdict, checks=checks)
+    keep = on_untrusted == "keep-seed"
+    return replace(verdict, status="not-trusted", extrinsic=seed if keep else verdict.extrinsic, kept_seed=keep,
+                   reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz")
+
+
 def rival_check(result: CalibrationResult) -> Check | None:
     """With a global search: no other start may end far away (``RIVAL_DEG``) with nearly the
     result's score (``RIVAL_SHARE``). Two distinct peaks scored alike mean the scenes cannot

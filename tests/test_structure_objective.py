@@ -218,3 +218,16 @@ def test_a_verdict_says_which_axes_come_from_the_seed_and_what_to_record() -> No
     assert d["translation_axes"]["x"] == {"pinned": True, "score_drop": 0.3}
     assert "left and right edges" in d["translation_axes"]["z"]["advice"]
     assert v.lines()[-1].startswith("  > z is not pinned")
+
+
+def test_outside_evidence_that_fails_hands_back_the_seed() -> None:
+    from l2e_studio.verdict import Check, Verdict, with_check
+
+    seed = Extrinsic(np.zeros(3), np.array([0.0, 0.0, 0.1]))
+    result = Extrinsic(np.radians([0.0, 1.0, 0.0]), np.zeros(3))
+    v = Verdict("trusted", result, False, (), (), 0.0, (), "")
+    ok = with_check(v, Check("boards agree", True, "1.0 cm RMS"), seed)
+    assert ok.status == "trusted" and ok.extrinsic is result and ok.checks[-1].name == "boards agree"
+    bad = with_check(v, Check("boards agree", False, "9.0 cm RMS"), seed)
+    assert bad.status == "not-trusted" and bad.kept_seed and bad.extrinsic is seed
+    assert bad.reasons == ("boards agree: 9.0 cm RMS",)
