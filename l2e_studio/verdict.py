@@ -15,7 +15,7 @@ from the truth. So the result is judged by what the optimiser never saw or never
   share; a flat axis (forward, on one street scan) is not pinned down, whatever the optimiser says.
 * **the result's own score** must beat the seed's.
 * **a significant peak**: the score at the result against its own random fluctuations around it
-  (the score at random rotations 2-8 deg away). Halves, second starts and the second score all
+  (the score at random rotations 2-8 deg away, its steady trend with the distance taken out). Halves, second starts and the second score all
   agree when every scene shares one bias (a static rig records one background many times), but a
   landscape at noise level puts its highest point wherever the noise does: the result's height
   above that far field, in standard deviations, must exceed what the best of noise reaches over
@@ -172,21 +172,27 @@ def noise_ceiling(settings: CalibrationSettings) -> float:
     return float(np.sqrt(2.0 * np.log(max(cells, 2.0))))
 
 
-def far_field(stack: SceneStack, at: Extrinsic) -> np.ndarray:
-    """(FAR_SAMPLES,) scores at random rotations of ``at`` FAR_DEG away (a fixed pattern)."""
+def far_field(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
+    """(FAR_SAMPLES,) angles (deg) and scores at random rotations of ``at`` FAR_DEG away (a fixed pattern)."""
     rng = np.random.default_rng(20230529)
     axes = rng.normal(size=(FAR_SAMPLES, 3))
     axes /= np.linalg.norm(axes, axis=1)[:, None]
-    angles = np.radians(rng.uniform(*FAR_DEG, FAR_SAMPLES))
-    return np.array([stack.score(at.perturbed(np.zeros(3), a * u), per_scene=False)[0] for a, u in zip(angles, axes)])
+    angles = rng.uniform(*FAR_DEG, FAR_SAMPLES)
+    scores = [stack.score(at.perturbed(np.zeros(3), np.radians(a) * u), per_scene=False)[0] for a, u in zip(angles, axes)]
+    return angles, np.array(scores)
 
 
 def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
-    """Is the result's score a peak above the landscape's own fluctuations, or the best of its noise?"""
+    """Is the result's score a peak above the landscape's own fluctuations, or the best of its noise?
+
+    The fluctuations are what is left of the far field once its steady trend with the distance
+    from the result is taken out: the paper's MI on event maps falls smoothly over degrees (a
+    wide basin, not noise), an edge score at noise level does not fall at all."""
     thin = stack.thinned(FAR_POINTS)
-    far = far_field(thin, res)
+    angles, far = far_field(thin, res)
     at = thin.score(res, per_scene=False)[0]
-    spread = float(np.std(far))
+    trend = np.polyval(np.polyfit(angles, far, 1), angles)
+    spread = float(np.sqrt(np.sum((far - trend) ** 2) / (len(far) - 2)))
     z = (at - float(np.mean(far))) / spread if spread > 0 else (np.inf if at > np.mean(far) else 0.0)
     need = noise_ceiling(settings)
     return Check("a significant peak" + tag, bool(z >= need),
