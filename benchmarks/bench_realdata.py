@@ -1,19 +1,26 @@
-"""Real dev rigs (../shared/realdata): closer / kept / worse than the seed, old objective vs new.
+"""Real dev rigs (../shared/realdata): closer / kept / worse than the seed, old engine vs new.
 
 Per rig and seed level (1 deg / 5 cm, 2 deg / 10 cm, 5 deg / 20 cm; random axis and direction,
 fixed RNG), calibrate from reference-perturbed seeds with
-* ``old``: the paper's MI, no verdict (the tool before the structure-aware objective), and
+* ``mi``: the paper's MI, no verdict (the tool before the structure-aware objective), and
 * ``new``: the default (objective chosen from the map kind, multi-start, verdict).
 A run is *worse* when its rotation error grows by > 0.1 deg or its translation error by > 1 cm,
 *closer* when it is not worse and one of them shrinks by more than that, else *kept*.
 Also: runs started at the reference, and one-axis sweeps of the new objective (PNG).
 
-    python benchmarks/bench_realdata.py [--runs 20] [--rigs manual,1+2,3,kitti] [--sweeps]
+    python benchmarks/bench_realdata.py [--runs 20] [--rigs all|manual,1+2,3,kitti,<folder>...] [--sweeps]
+        [--levels 1,2,5,0] [--save rows.json]
+    python benchmarks/bench_realdata.py --table old.json new.json     # two saved runs side by side
+
+The engine is whatever ``l2e_studio`` imports: run once with ``PYTHONPATH`` at a checkout of an
+older commit (``git worktree add /tmp/l2e_old <commit>``) and ``--save old.json``, once here with
+``--save new.json``, then ``--table`` the two.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -26,7 +33,7 @@ from realdata_rigs import load_rigs, perturbations  # noqa: E402
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  # noqa: E402
 from l2e_studio.verdict import judge  # noqa: E402
 
-LEVELS = ((1.0, 0.05), (2.0, 0.10), (5.0, 0.20))
+LEVELS = {1: (1.0, 0.05), 2: (2.0, 0.10), 5: (5.0, 0.20), 0: (0.0, 0.0)}
 OUT = Path(__file__).resolve().parent / "out"
 
 
@@ -37,14 +44,37 @@ def classify(seed_err: tuple[float, float], end_err: tuple[float, float]) -> str
     return "closer" if dr < -0.1 or dt < -0.01 else "kept"
 
 
-def run_rig(rig, runs: int, levels, variants) -> list[dict]:
+def board_evidence(rig):
+    """For a rig with a checkerboard in view: ``check(verdict, seed) -> verdict`` adding the
+    boards' agreement with what the verdict hands back (target_verdict.board_check); else None."""
+    if rig.board is None:
+        return None
+    from l2e_studio.target import board_frames, detect_frames, load_target
+    from l2e_studio.target_verdict import board_check
+    from l2e_studio.verdict import with_check
+
+    board = load_target(rig.board)
+    found = detect_frames(rig.scenes, rig.camera, board, use_cache=False)
+
+    def check(v, seed):
+        if not v.trusted:
+            return v
+        frames = board_frames(rig.scenes, rig.camera, board, v.extrinsic, detections=found, use_cache=False)
+        return with_check(v, board_check(v.extrinsic, frames, board), seed)
+
+    return check
+
+
+def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict]:
     rows = []
+    with_boards = board_evidence(rig) if boards and "new" in variants else None
     wide = CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0)
     for variant in variants:
-        settings = CalibrationSettings(objective="mi", global_search=False) if variant == "old" else CalibrationSettings()
+        settings = CalibrationSettings(objective="mi", global_search=False) if variant == "mi" else CalibrationSettings()
         stack = stack_scenes(rig.scenes, rig.camera, rig.reference, wide if variant == "new" else
                              CalibrationSettings(objective="mi", translation_bound=0.5, rotation_bound_deg=20.0))
-        for li, (deg, m) in enumerate(levels):
+        for deg, m in levels:
+            li = list(LEVELS.values()).index((deg, m))  # the same seeds whichever levels run
             starts = perturbations(runs, deg, m, 1000 + li) if deg > 0 else [(np.zeros(3), np.zeros(3))] * 2
             for dt, dr in starts:
                 seed = rig.reference.perturbed(dt, dr)
@@ -53,31 +83,41 @@ def run_rig(rig, runs: int, levels, variants) -> list[dict]:
                 status, end = "-", result.extrinsic
                 if variant == "new":
                     v = judge(stack, result, settings)
+                    if with_boards is not None:
+                        v = with_boards(v, seed)
                     status, end = v.status, v.extrinsic
                 seconds = time.perf_counter() - t0
                 se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
-                rows.append(dict(rig=rig.name, variant=variant, level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
+                unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if variant == "new" else []
+                rows.append(dict(rig=rig.name, variant=variant, unpinned="".join(unpinned), level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
                                  end_deg=ee[0], end_m=ee[1], cls=classify(se, ee), status=status, seconds=seconds))
+                oe = result.extrinsic.error_to(rig.reference)
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
-                      f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s", flush=True)
+                      f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "
+                      f"(optimiser {oe[0]:.2f}/{100 * oe[1]:.1f})", flush=True)
     return rows
 
 
-def table(rows: list[dict]) -> str:
-    lines = ["| rig | seeds | objective | closer | kept | worse | median end error | trusted / rot. only / not |",
-             "|---|---|---|---|---|---|---|---|"]
-    keys = []
-    for r in rows:
-        k = (r["rig"], r["level"], r["variant"])
-        if k not in keys:
-            keys.append(k)
-    for rig, level, variant in keys:
-        sel = [r for r in rows if (r["rig"], r["level"], r["variant"]) == (rig, level, variant)]
+def table(rows: list[dict], label: str = "") -> str:
+    """One line per rig, seed level and variant: closer / kept / worse, median end error, statuses."""
+    lines = ["| rig | seeds | engine | closer | kept | worse | median end error | trusted / rot. only / not | trusted but worse |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    def key(r: dict) -> tuple:
+        return r["rig"], r["level"], r["variant"], r.get("engine", label)
+
+    order = [list(dict.fromkeys(k[i] for k in map(key, rows))) for i in range(4)]
+    keys = sorted(set(map(key, rows)), key=lambda k: tuple(order[i].index(k[i]) for i in range(4)))
+    for rig, level, variant, engine in keys:
+        sel = [r for r in rows if key(r) == (rig, level, variant, engine)]
         c = {k: sum(r["cls"] == k for r in sel) for k in ("closer", "kept", "worse")}
         med = f"{np.median([r['end_deg'] for r in sel]):.2f} deg / {100 * np.median([r['end_m'] for r in sel]):.1f} cm"
-        st = "-" if variant == "old" else "/".join(str(sum(r["status"] == s for r in sel)) for s in ("trusted", "trusted-rotation", "not-trusted"))
-        name = "paper MI" if variant == "old" else "new (auto + verdict)"
-        lines.append(f"| {rig} | {level} | {name} | {c['closer']} | {c['kept']} | {c['worse']} | {med} | {st} |")
+        trusted_worse = "-"
+        st = "-"
+        if variant != "mi":
+            st = "/".join(str(sum(r["status"] == s for r in sel)) for s in ("trusted", "trusted-rotation", "not-trusted"))
+            trusted_worse = str(sum(r["status"] != "not-trusted" and r["cls"] == "worse" for r in sel))
+        name = "paper MI, no verdict" if variant == "mi" else (engine or "auto + verdict")
+        lines.append(f"| {rig} | {level} | {name} | {c['closer']} | {c['kept']} | {c['worse']} | {med} | {st} | {trusted_worse} |")
     return "\n".join(lines)
 
 
@@ -113,19 +153,33 @@ def sweeps(rigs, path: Path) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--runs", type=int, default=20)
-    p.add_argument("--rigs", default="manual,1+2,3,kitti")
-    p.add_argument("--variants", default="old,new")
+    p.add_argument("--runs", type=int, default=20, help="runs per rig and seed level (0: none, e.g. with --sweeps)")
+    p.add_argument("--rigs", default="all")
+    p.add_argument("--levels", default="1,2,5,0", help="seed levels: 1 (1 deg / 5 cm), 2, 5, 0 (the reference)")
+    p.add_argument("--variants", default="mi,new")
     p.add_argument("--sweeps", action="store_true")
+    p.add_argument("--boards", action="store_true",
+                   help="rigs with a target.yaml: the boards in view must agree with a trusted result")
+    p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
+    p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     args = p.parse_args()
+    if args.table:
+        rows = []
+        for path in args.table:
+            rows += [dict(r, engine=path.stem) for r in json.loads(path.read_text())]
+        print(table(rows))
+        return
     rigs = load_rigs(args.rigs.split(","))
     if not rigs:
-        sys.exit("no real data found under ../shared/realdata")
+        sys.exit("no real data found under ../shared/realdata (set L2E_REALDATA)")
     if args.sweeps:
         sweeps(rigs, OUT / "realdata_sweeps.png")
+    levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows = []
-    for rig in rigs:
-        rows += run_rig(rig, args.runs, LEVELS + ((0.0, 0.0),), args.variants.split(","))
+    for rig in rigs if levels else ():
+        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards)
+        if args.save:
+            args.save.write_text(json.dumps(rows, indent=1))
     print(table(rows))
 
 

@@ -4,6 +4,7 @@ reference extrinsic. Used by bench_realdata.py and the real-data tests; absent d
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,11 +15,16 @@ from l2e_studio.geometry import Extrinsic
 from l2e_studio.io.cameras import load_rig, load_seed
 from l2e_studio.io.lidar import load_lidar
 from l2e_studio.io.maps import load_map
-from l2e_studio.scenes import Scene
+from l2e_studio.scenes import Scene, load_scene_folder
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+#: ``L2E_REALDATA`` overrides where the data sits (a worktree is one level deeper than the repo).
+REALDATA = Path(os.environ.get("L2E_REALDATA", Path(__file__).resolve().parents[2] / "shared" / "realdata"))
 OPENCALIB = REALDATA / "opencalib_lidar2camera"
 KITTI = REALDATA / "kitti_mmdet3d_000008"
+#: Scene folders of several scenes each (the reference in each folder's reference.yaml).
+FOLDERS = ("kitti_odometry_00", "hitsz_vlp16", "lcecalib_rlfs01", "lcecalib_rles01_frame", "lcecalib_rles01_event")
+SINGLE = ("manual", "1+2", "3", "kitti")
+ALL = SINGLE + FOLDERS
 
 
 @dataclass(frozen=True)
@@ -27,6 +33,7 @@ class Rig:
     camera: CameraModel
     reference: Extrinsic
     scenes: tuple[Scene, ...]
+    board: Path | None = None  # the folder's target.yaml, when a checkerboard is in view
 
 
 def _image(folder: Path) -> Path:
@@ -40,9 +47,12 @@ def _scene(name: str, lidar: Path, image: Path) -> tuple[Scene, np.ndarray]:
 
 
 def load_rigs(names: list[str] | None = None) -> list[Rig]:
-    """The four dev rigs (OpenCalib manual, OpenCalib 1+2, OpenCalib 3, KITTI 000008) that are present."""
+    """The dev rigs that are present: the four single-scene ones (OpenCalib manual, OpenCalib
+    1+2, OpenCalib 3, KITTI 000008) and the scene folders of :data:`FOLDERS` (``all``: every one)."""
     rigs: list[Rig] = []
-    want = set(names or ["manual", "1+2", "3", "kitti"])
+    want = set(names or SINGLE)
+    if "all" in want:
+        want |= set(ALL)
     if "manual" in want and (OPENCALIB / "manual_calib").is_dir():
         d = OPENCALIB / "manual_calib" / "data"
         sc, grey = _scene("manual", d / "0.pcd", d / "0.png")
@@ -66,6 +76,11 @@ def load_rigs(names: list[str] | None = None) -> list[Rig]:
         camera = CameraModel(np.array(c["K"]), c["image_width"], c["image_height"], np.array(c["D"], float))
         sc, _ = _scene("000008", KITTI / "000008.bin", KITTI / "000008.png")
         rigs.append(Rig("kitti", camera, Extrinsic.from_matrix(np.array(c["T_cam_lidar"])), (sc,)))
+    for name in FOLDERS:
+        if name in want and (REALDATA / name / "reference.yaml").is_file():
+            folder = load_scene_folder(REALDATA / name, REALDATA / name / "reference.yaml", use_cache=False)
+            board = REALDATA / name / "target.yaml"
+            rigs.append(Rig(name, folder.camera, folder.seed, tuple(folder.scenes), board if board.is_file() else None))
     return rigs
 
 

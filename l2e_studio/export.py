@@ -206,8 +206,14 @@ def export_status(result: dict | None) -> tuple[str, list[str]]:
                                     "not-trusted" if v.get("trusted") is False else NOT_JUDGED))
     lines = [f"status: {status}" + (f" ({v['summary']})" if v.get("summary") else "")]
     if status == "trusted-rotation":
-        lines.append("translation: the SEED's translation, not calibrated (these scenes do not pin it down); "
-                     "only the rotation was calibrated and checked")
+        from_seed = "".join(str(a) for a in v.get("translation_from_seed", "xyz"))
+        if from_seed and set(from_seed) != set("xyz"):
+            calibrated = ", ".join(a for a in "xyz" if a not in from_seed)
+            lines.append(f"translation along {', '.join(from_seed)}: the SEED's, not calibrated (these scenes do not "
+                         f"pin it down); along {calibrated}: calibrated; the rotation was calibrated and checked")
+        else:
+            lines.append("translation: the SEED's translation, not calibrated (these scenes do not pin it down); "
+                         "only the rotation was calibrated and checked")
     elif status == "not-trusted":
         lines.append("this is the SEED, not a calibration: the result was not trusted" if v.get("kept_seed", True)
                      else "this is the optimiser's result, which was NOT TRUSTED")

@@ -14,9 +14,19 @@ from the truth. So the result is judged by what the optimiser never saw or never
 * **translation observable**: moving the result 5 cm along each axis must cost the score a fair
   share; a flat axis (forward, on one street scan) is not pinned down, whatever the optimiser says.
 * **the result's own score** must beat the seed's.
+* **a significant peak**: the score at the result against its own random fluctuations around it
+  (the score at random rotations 2-8 deg away, its steady trend with the distance taken out). Halves, second starts and the second score all
+  agree when every scene shares one bias (a static rig records one background many times), but a
+  landscape at noise level puts its highest point wherever the noise does: the result's height
+  above that far field, in standard deviations, must exceed what the best of noise reaches over
+  the searched box (:func:`noise_ceiling`).
+
+Per translation axis the verdict says whether the scenes pin it, and what to record when not
+(:func:`translation_axes`).
 
 All agree: ``trusted``. Only the translation checks fail (one or two street scans seldom pin the
-translation): ``trusted-rotation``, the checked rotation with the seed's translation, if the scenes
+translation): ``trusted-rotation``, the checked rotation with the seed's translation (the result's
+along the axes the scenes pin, when the halves and the second start agree on it), if the scenes
 and both halves prefer that to the seed; when the rotation's checks failed too, a rotation fitted
 to the seed's translation gets a second chance on the same evidence. Otherwise ``not-trusted``:
 the seed is handed back (the default) or the result is kept and marked, as the caller chooses;
@@ -55,6 +65,16 @@ MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from t
 RIVAL_DEG = 2.0  # another start's end this far (or further) from the result ...
 RIVAL_SHARE = 0.9  # ... with this share of its score (or more) is a second answer: the data cannot tell
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
+FAR_DEG = (2.0, 8.0)  # the far field of a peak: random rotations this far from it (deg) ...
+FAR_SAMPLES = 48  # ... this many of them (a fixed pattern, so a verdict is repeatable) ...
+FAR_POINTS = 100_000  # ... scored on at most this many points
+CELL_DEG = 0.1  # the landscape's resolution: the searched box holds (width / CELL_DEG)^3 independent cells
+#: Per camera axis: what moves its translation, and what to record when the scenes do not pin it.
+AXIS_ADVICE = {
+    "x": "add scenes with near objects (a few metres) whose vertical edges stand in front of a far background",
+    "y": "add scenes with near objects whose top or bottom edges are in view (a table, a car's roof at a few metres)",
+    "z": "add scenes with near objects at the image's left and right edges",
+}
 
 
 @dataclass(frozen=True)
@@ -74,6 +94,10 @@ class Verdict:
     reasons: tuple[str, ...]  # one line per failed check (empty when trusted)
     checks: tuple[Check, ...]
     seconds: float
+    #: per camera axis (x right, y down, z forward): is the translation pinned, and if not what to record
+    translation: tuple["AxisPinned", ...] = ()
+    #: the axes whose translation is the seed's in what is handed back (``trusted-rotation``)
+    seed_axes: str = "xyz"
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -87,21 +111,34 @@ class Verdict:
         """One line a user understands (the reasons are in ``reasons``)."""
         if self.status == "trusted":
             return "trusted: both halves of the data, a second start and an independent score agree with the result"
+        if self.status == "trusted-rotation" and self.seed_axes != "xyz":
+            taken = ", ".join(a for a in "xyz" if a not in self.seed_axes)
+            kept = ", ".join(self.seed_axes)
+            return (f"rotation and the translation along {taken} trusted; along {kept} the translation is not "
+                    f"pinned down by these scenes, the seed's is kept")
         if self.status == "trusted-rotation":
             return "rotation trusted; the translation is not pinned down by these scenes, the seed's translation is kept"
         return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")
 
+    def advice(self) -> list[str]:
+        """One line per translation axis the scenes do not pin: which, and what to record."""
+        return [a.line() for a in self.translation if not a.pinned]
+
     def lines(self) -> list[str]:
-        """The summary, then one indented line per reason (for a terminal)."""
-        return [f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
+        """The summary, one indented line per reason, then what to record (for a terminal)."""
+        return ([f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
+                + [f"  > {a}" for a in self.advice()])
 
     def to_dict(self) -> dict:
         return {
             "status": self.status,
             "summary": self.summary(),
             "kept_seed": self.kept_seed,
+            **({"translation_from_seed": list(self.seed_axes)} if self.status == "trusted-rotation" else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
+            "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
+                                          **({} if a.pinned else {"advice": a.line()})} for a in self.translation},
             "seconds": round(self.seconds, 3),
         }
 
@@ -148,6 +185,63 @@ class _Steps:
         if self.on_progress is not None:
             self.on_progress(JudgeProgress(self.step, self.total, self.label,
                                            min(1.0, (self.step - 1 + inner) / self.total), time.perf_counter() - self.t0))
+
+
+@dataclass(frozen=True)
+class AxisPinned:
+    """Whether the scenes pin the translation along one camera axis: the share of the score lost
+    by moving ``PROBE_M`` along it (the smaller side), against the objective's need."""
+
+    axis: str  # "x", "y" or "z" (camera frame: right, down, forward)
+    pinned: bool
+    drop: float
+
+    def line(self) -> str:
+        state = "pinned" if self.pinned else "not pinned"
+        text = f"{self.axis} is {state} (moving {100 * PROBE_M:.0f} cm costs {100 * self.drop:.0f} % of the score)"
+        return text if self.pinned else f"{text}: {AXIS_ADVICE[self.axis]}"
+
+
+def translation_axes(drops: np.ndarray, objective: str) -> tuple[AxisPinned, ...]:
+    """Per camera axis, whether :func:`translation_drops` shows the scenes pin it."""
+    need = OBSERVABLE_DROP[objective]
+    return tuple(AxisPinned(axis, bool(d >= need), float(d)) for axis, d in zip("xyz", drops))
+
+
+def noise_ceiling(settings: CalibrationSettings) -> float:
+    """How many standard deviations above its mean the best of a landscape of pure noise reaches
+    over the searched rotation box: ``sqrt(2 ln N)`` for ``N`` independent cells of
+    ``CELL_DEG`` (the expected maximum of N Gaussian draws; 5.6 for the default +-10 deg)."""
+    cells = (2.0 * settings.rotation_bound_deg / CELL_DEG) ** 3
+    return float(np.sqrt(2.0 * np.log(max(cells, 2.0))))
+
+
+def far_field(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
+    """(FAR_SAMPLES,) angles (deg) and scores at random rotations of ``at`` FAR_DEG away (a fixed pattern)."""
+    rng = np.random.default_rng(20230529)
+    axes = rng.normal(size=(FAR_SAMPLES, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = rng.uniform(*FAR_DEG, FAR_SAMPLES)
+    scores = [stack.score(at.perturbed(np.zeros(3), np.radians(a) * u), per_scene=False)[0] for a, u in zip(angles, axes)]
+    return angles, np.array(scores)
+
+
+def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
+    """Is the result's score a peak above the landscape's own fluctuations, or the best of its noise?
+
+    The fluctuations are what is left of the far field once its steady trend with the distance
+    from the result is taken out: the paper's MI on event maps falls smoothly over degrees (a
+    wide basin, not noise), an edge score at noise level does not fall at all."""
+    thin = stack.thinned(FAR_POINTS)
+    angles, far = far_field(thin, res)
+    at = thin.score(res, per_scene=False)[0]
+    trend = np.polyval(np.polyfit(angles, far, 1), angles)
+    spread = float(np.sqrt(np.sum((far - trend) ** 2) / (len(far) - 2)))
+    z = (at - float(np.mean(far))) / spread if spread > 0 else (np.inf if at > np.mean(far) else 0.0)
+    need = noise_ceiling(settings)
+    return Check("a significant peak" + tag, bool(z >= need),
+                 f"the score stands {z:.1f} standard deviations above its values {FAR_DEG[0]:g}-{FAR_DEG[1]:g} deg "
+                 f"away (the best of noise over the searched box reaches {need:.1f})")
 
 
 def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
@@ -237,28 +331,43 @@ def judge(
     if on_untrusted not in ON_UNTRUSTED:
         raise ValueError(f"on_untrusted must be one of {', '.join(ON_UNTRUSTED)}")
     t0 = time.perf_counter()
-    steps = _Steps(1 + evidence_steps(settings), cancel, on_progress)
+    steps = _Steps(1 + evidence_steps(settings) + (not settings.rotation_only), cancel, on_progress)  # + translation probes
     seed, res = result.seed, result.extrinsic
     steps.next("preparing the final smoothing and the second score")
     final = stack.with_sigma(settings.sigma)
     steps.check()
     second = second_score(final)
     checks = evidence(final, seed, res, settings, second, cancel, steps)
+    axes: tuple[AxisPinned, ...] = ()
+    if not settings.rotation_only:
+        steps.next("translation probes: the result moved 5 cm along x, y, z")
+        axes = translation_axes(translation_drops(final, res, final.score(res, per_scene=False)[0]), final.objective_name)
+        need = OBSERVABLE_DROP[final.objective_name]
+        checks.append(Check("translation observable (translation)", all(a.pinned for a in axes),
+                            f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
+                            + ", ".join(f"{100 * a.drop:.0f} %" for a in axes) + f" (at least {100 * need:.0f} % each)"))
     rival = rival_check(result)
     if rival is not None:
         checks.append(rival)
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
     if not failed:
-        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0)
+        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0, axes, "")
     if all(c.name.endswith("(translation)") for c in failed):
         # Only the translation is not pinned down (one or two scans of a street seldom pin it):
         # hand back the checked rotation with the seed's translation, if the scenes and both
         # halves prefer that to the seed too.
-        mixed = Extrinsic(res.rotvec, seed.translation)
-        if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0]
-               for h in (final, *(final.select(m) for m in halves(final, seed)))):
-            return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0)
+        # Where halves and the second start agree on the translation, the axes the scenes pin
+        # are the result's (the others the seed's); else all three are the seed's.
+        agree = all(c.passed for c in checks if c.name in ("halves agree (translation)", "second start (translation)"))
+        pinned = np.array([a.pinned for a in axes]) if agree and axes else np.zeros(3, dtype=bool)
+        sides = [final, *(final.select(m) for m in halves(final, seed))]
+        for take in ([pinned, np.zeros(3, dtype=bool)] if pinned.any() else [pinned]):
+            mixed = Extrinsic(res.rotvec, np.where(take, res.translation, seed.translation))
+            if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides):
+                kept = "".join(a for a, t in zip("xyz", take) if not t)
+                return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0,
+                               axes, kept)
     if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
             (rival is None or rival.passed):
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
@@ -274,17 +383,29 @@ def judge(
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return Verdict("trusted-rotation", refit, False, reasons, tuple(checks) + tuple(rot_checks),
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, axes)
         reasons += tuple(f"with the seed's translation, {c.name}: {c.detail}" for c in rot_failed)
         checks += rot_checks
     steps.check()
     keep = on_untrusted == "keep-seed"
-    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0)
+    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes)
+
+
+def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: str = "keep-seed") -> Verdict:
+    """``verdict`` with one more piece of outside evidence (e.g. the boards in view,
+    :func:`l2e_studio.target_verdict.board_check` of what the verdict hands back): a failed
+    check makes a trusted result ``not-trusted``, the seed handed back (or the result marked)."""
+    checks = verdict.checks + (check,)
+    if check.passed or not verdict.trusted:
+        return replace(verdict, checks=checks)
+    keep = on_untrusted == "keep-seed"
+    return replace(verdict, status="not-trusted", extrinsic=seed if keep else verdict.extrinsic, kept_seed=keep,
+                   reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz")
 
 
 def evidence_steps(settings: CalibrationSettings) -> int:
-    """How many steps :func:`evidence` reports (scores, translation probes, two halves, second start)."""
-    return 4 + (not settings.rotation_only)
+    """How many steps :func:`evidence` reports (scores, the peak's significance, two halves, second start)."""
+    return 5
 
 
 def rival_check(result: CalibrationResult) -> Check | None:
@@ -333,13 +454,8 @@ def evidence(
     slack = SECOND_SCORE_SLACK if name.startswith("edge") else 0.0
     checks.append(Check("second score" + tag, after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
 
-    if not rotation_only:
-        steps.next("translation probes: the result moved 5 cm along x, y, z")
-        drops = translation_drops(final, res, s_res)
-        need = OBSERVABLE_DROP[final.objective_name]
-        checks.append(Check("translation observable (translation)", bool(np.all(drops >= need)),
-                            f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
-                            + ", ".join(f"{100 * d:.0f} %" for d in drops) + f" (at least {100 * need:.0f} % each)"))
+    steps.next("a significant peak: the score 2-8 deg around the result against its fluctuations")
+    checks.append(significance_check(final, res, settings, tag))
 
     a, b = halves(final, seed)
     if a.sum() == 0 or b.sum() == 0:

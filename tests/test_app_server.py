@@ -225,7 +225,9 @@ def test_the_verdict_is_shown_beside_the_result_and_saved(app):
     assert f"Verdict: {v.summary()}" in app.results.summary.content
     for reason in v.reasons:
         assert reason in app.results.summary.content
-    expected = {"trusted": "Accept as seed", "trusted-rotation": "Accept rotation (seed's translation kept)",
+    rotation = ("Accept rotation (seed's translation kept)" if v.seed_axes == "xyz" else
+                f"Accept (seed's translation kept along {', '.join(v.seed_axes)})")
+    expected = {"trusted": "Accept as seed", "trusted-rotation": rotation,
                 "not-trusted": "Accept anyway (not trusted)"}[v.status]
     assert app.results.accept.label == expected
     path, _ = app.save_result()

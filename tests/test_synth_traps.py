@@ -76,3 +76,35 @@ def test_unknown_traps_are_refused() -> None:
         SynthConfig(map_kind="image", traps=("flicker",))
     with pytest.raises(ValueError, match="map_kind"):
         SynthConfig(map_kind="lidar")
+
+
+def test_a_bias_every_scene_shares_is_not_trusted(tmp_path: Path) -> None:
+    """A static rig: one cluttered scene (sky, shading, unrelated texture, foliage; a sparse
+    scan) recorded six times with fresh image noise. Every scene carries the same misleading
+    structure, so halves and second starts can agree on a wrong peak; the result's height against
+    the score's own far field (a significant peak) is evidence of another kind, and must fail."""
+    import dataclasses
+
+    config = config_with(SMALL, n_scenes=1, points_per_scan=3000, traps=("sky", "shading", "texture", "vegetation"))
+    folder = write_dataset(tmp_path / "static", config)
+    loaded = load_scene_folder(folder, use_cache=False)
+    truth = read_truth(folder / "truth.yaml")
+    rng = np.random.default_rng(0)
+    base = loaded.scenes[0]
+    scenes = [dataclasses.replace(base, name=f"copy{i}", event_map=np.clip(
+        base.event_map + rng.normal(0, 6, base.event_map.shape), 0, 255).astype(np.float32)) for i in range(6)]
+    settings = CalibrationSettings()
+    pulled = 0
+    for _ in range(2):
+        seed = perturb(truth, 2.0, 0.10, rng)
+        stack = stack_scenes(scenes, loaded.camera, seed, settings)
+        result = calibrate(stack, None, seed, settings)
+        verdict = judge(stack, result, settings)
+        seed_deg, raw_deg = seed.error_to(truth)[0], result.extrinsic.error_to(truth)[0]
+        if raw_deg > seed_deg + 0.1:
+            pulled += 1
+            peak = next(c for c in verdict.checks if c.name == "a significant peak")
+            assert not peak.passed, peak.detail
+            assert verdict.status == "not-trusted" and verdict.kept_seed, verdict.lines()
+        assert verdict.extrinsic.error_to(truth)[0] <= seed_deg + 0.1, verdict.lines()
+    assert pulled, "the shared clutter did not pull the optimiser away"

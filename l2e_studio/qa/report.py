@@ -238,6 +238,10 @@ def verdict_html(v) -> str:
         out.append(_tbl(["check", "", "what was measured"],
                         [[name, "passed" if c.get("passed") else "FAILED", c.get("detail", "")]
                          for name, c in checks.items() if isinstance(c, dict)], cls="checks"))
+    axes = v.get("translation_axes")
+    advice = [a["advice"] for a in axes.values() if isinstance(a, dict) and a.get("advice")] if isinstance(axes, dict) else []
+    if advice:
+        out.append("<h3>Translation: what to record</h3><ul>" + "".join(f"<li>{_e(a)}</li>" for a in advice) + "</ul>")
     if v.get("seconds") is not None:
         out.append(f"<p class='small'>judged in {_e(v['seconds'])} s</p>")
     return "\n".join(out)

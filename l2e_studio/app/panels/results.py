@@ -129,9 +129,8 @@ VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "�
 def verdict_text(verdict) -> str:
     """The verdict in words, with why (markdown)."""
     head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
-    if not verdict.reasons:
-        return head
-    return head + "".join(f"  \n· {r}" for r in verdict.reasons)
+    return (head + "".join(f"  \n· {r}" for r in verdict.reasons)
+            + "".join(f"  \n→ {a}" for a in verdict.advice()))
 
 
 def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
@@ -142,6 +141,8 @@ def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
         return "yellow", "Accept as seed (not judged)"
     if verdict.status == "trusted":
         return "green", "Accept as seed"
+    if verdict.status == "trusted-rotation" and verdict.seed_axes != "xyz":
+        return "green", f"Accept (seed's translation kept along {', '.join(verdict.seed_axes)})"
     if verdict.status == "trusted-rotation":
         return "green", "Accept rotation (seed's translation kept)"
     return "red", "Accept anyway (not trusted)"
