@@ -28,11 +28,12 @@ def test_judging_reports_every_step_in_order_and_ends_done(calibrated):
     seen: list[JudgeProgress] = []
     verdict = judge(stack, result, settings, on_progress=seen.append)
     labels = list(dict.fromkeys(p.label for p in seen))
-    assert labels[:6] == ["preparing the final smoothing and the second score",
+    assert labels[:7] == ["preparing the final smoothing and the second score",
                           "the scores at the seed and at the result",
-                          "translation probes: the result moved 5 cm along x, y, z",
+                          "a significant peak: the score 2-8 deg around the result against its fluctuations",
                           "half 1 of 2: refined on its own", "half 2 of 2: refined on its own",
-                          "a second start, mirrored through the result"]
+                          "a second start, mirrored through the result",
+                          "translation probes: the result moved 5 cm along x, y, z"]
     steps = [p.step for p in seen]
     assert steps == sorted(steps) and steps[0] == 1 and all(p.step <= p.steps for p in seen)
     fractions = [p.fraction for p in seen]
