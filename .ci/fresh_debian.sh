@@ -2,7 +2,8 @@
 # The README's commands on a truly fresh Debian 12: build a throwaway minbase root with debootstrap,
 # install in it only what the README's command 0 installs, copy the repository in (git archive of
 # HEAD) and run commands 1 and 2 exactly as the README writes them. Needs root, debootstrap and the
-# network (the Debian mirror and PyPI); nothing of this machine's Python, wheels or caches goes in.
+# network (the Debian mirror and PyPI); of this machine only pip's CA bundle goes in (PyPI is reached
+# through a TLS-inspecting proxy here), none of its Python, wheels or caches.
 #
 #   sudo .ci/fresh_debian.sh [ROOT]      # ROOT: an empty folder to build in (default: a temp dir)
 #
