@@ -144,9 +144,11 @@ def test_page_loads_with_panels_overlay_and_scene_list(page, app):
     assert page.get_by_text("L2E Studio").first.is_visible()
     for name in app.state.scene_names:
         assert page.get_by_role("cell", name=name).first.is_visible()
-    # the overlay shows a full-size map of the selected scene, and the MI column is filled in
+    # the overlay shows the whole map of the selected scene, drawn at the panel's frame width (points
+    # at their screen size; a small map is magnified), and the MI column is filled in
     size = page.evaluate("() => { const i = document.querySelector(\"img[src^='blob:']\"); return [i.naturalWidth, i.naturalHeight]; }")
-    assert size == [app.camera.width, app.camera.height]
+    assert app.camera.width < size[0] <= app.overlay.display_width
+    assert size[1] == pytest.approx(size[0] * app.camera.height / app.camera.width, abs=1)
     wait_for(lambda: app.reading is not None, what="the first MI reading")
     first_mi = score_num(app.reading.per_scene[0])
     page.get_by_role("cell", name=first_mi).first.wait_for()

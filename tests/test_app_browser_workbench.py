@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app_fixtures import free_port, launch_browser, screenshot, wait_for
+from app_fixtures import free_port, screenshot, wait_for
 from test_app_browser import (app, browser, close_webgl_notice, exact_field, open_app, open_tab,  # noqa: F401
                               scene_set, slider_root)
 

@@ -110,7 +110,7 @@ def test_exclusion_changes_the_pooled_mi_only(app):
 def test_display_controls_change_the_overlay(app):
     idle(app)
     shots = [app.overlay.image.image.copy()]
-    for handle, value in ((app.overlay.color_by, "depth"), (app.overlay.point_size, 4),
+    for handle, value in ((app.overlay.color_by, "depth"), (app.overlay.point_size, 7),
                           (app.overlay.contrast, 3.0), (app.overlay.map_mode, "smoothed")):
         handle.value = value  # programmatic updates run the same callbacks
         idle(app)
@@ -148,7 +148,8 @@ def test_run_result_accept_and_discard(app):
     for mode in ("swipe", "blend"):
         app.compare.mode.value = mode
         idle(app)
-        assert app.compare.image.image.shape == (app.camera.height, app.camera.width, 3)
+        dw = app.overlay.display_width  # drawn at the panel's frame width (points at their screen size)
+        assert app.compare.image.image.shape == (round(app.camera.height * dw / app.camera.width), dw, 3)
     app.accept_result()
     assert np.allclose(app.state.snapshot().extrinsic.params, snap.result.extrinsic.params)
     app.discard_result()

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from ..camera import CameraModel
+from ..drawing import depth_colors, disc_size, draw_points, point_table
 from ..geometry import Extrinsic, in_image, project_points
 from . import AXES, UNITS
 
@@ -33,10 +34,16 @@ def display_factor(camera: CameraModel) -> int:
     return max(1, int(round(800 / camera.width)))
 
 
+#: CSS px an overlay figure is shown at in the report (two per row): discs are sized for it.
+SHOWN_PX = 520
+
+
 def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ext: Extrinsic, camera: CameraModel,
-            clip: float = 127.0, radius: int = 1) -> np.ndarray:
-    """The event map in grey with the lidar points projected at ``ext`` as small discs coloured by
-    intensity (turbo). Maps narrower than 800 px are enlarged by :func:`display_factor` first."""
+            clip: float = 127.0, point_px: float = 2.0, map_kind: str = "events") -> np.ndarray:
+    """The map in grey with the lidar points projected at ``ext`` as discs ``point_px`` across
+    when the figure is shown :data:`SHOWN_PX` wide, each with a dark outline; coloured by depth
+    on camera images (``map_kind="image"``), by intensity on event maps. Maps narrower than
+    800 px are enlarged by :func:`display_factor` first."""
     f = display_factor(camera)
     m = np.clip(np.asarray(event_map, np.float32), 0, clip)
     hi = float(np.percentile(m, 99.5)) or 1.0
@@ -48,22 +55,14 @@ def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ex
     front = cam_pts[:, 2] > 0.05
     uv, _ = project_points(cam_pts[front], camera)
     inside = in_image(uv, camera)
-    uv = np.rint((uv[inside] + 0.5) * f - 0.5).astype(np.int32)
-    uv[:, 0] = np.clip(uv[:, 0], 0, img.shape[1] - 1)
-    uv[:, 1] = np.clip(uv[:, 1], 0, img.shape[0] - 1)
-    val = np.clip(np.asarray(intensity, np.float64)[front][inside], 0, 255).astype(np.uint8)
-    colors = cv2.applyColorMap(val[:, None], cv2.COLORMAP_TURBO)[:, 0, ::-1]
-    layer = np.zeros_like(img)
-    mask = np.zeros(img.shape[:2], np.uint8)
-    layer[uv[:, 1], uv[:, 0]] = colors
-    mask[uv[:, 1], uv[:, 0]] = 255
-    if radius > 0:
-        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-        layer = cv2.dilate(layer, k)
-        mask = cv2.dilate(mask, k)
-    sel = mask > 0
-    img[sel] = (0.2 * img[sel] + 0.8 * layer[sel]).astype(np.uint8)
-    return img
+    uv = (uv[inside] + 0.5) * f - 0.5
+    depth = cam_pts[front][inside, 2]
+    if map_kind == "events":
+        colors = point_table()[np.clip(np.asarray(intensity, np.float64)[front][inside], 0, 255).astype(np.uint8)]
+    else:
+        colors = depth_colors(depth)
+    per_screen = img.shape[1] / SHOWN_PX
+    return draw_points(img, uv, colors, disc_size(point_px, per_screen), 0.85, depth, disc_size(1, per_screen))
 
 
 def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, int]:

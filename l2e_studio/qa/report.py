@@ -383,8 +383,8 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
     for k, sc in enumerate(ss.scenes):
         say(f"overlay {k + 1}/{len(ss.scenes)}")
         clip = CLIP.get(sc.map_kind, 127.0)
-        before = figures.overlay(sc.event_map, sc.points, sc.intensity, inp.seed, cam, clip)
-        after = figures.overlay(sc.event_map, sc.points, sc.intensity, ext, cam, clip)
+        before = figures.overlay(sc.event_map, sc.points, sc.intensity, inp.seed, cam, clip, map_kind=sc.map_kind)
+        after = figures.overlay(sc.event_map, sc.points, sc.intensity, ext, cam, clip, map_kind=sc.map_kind)
         box = figures.crop_box(sc.event_map)
         f = figures.display_factor(cam)
         j = table.scenes.index(sc.name) if sc.name in table.scenes else -1
