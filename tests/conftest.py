@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,8 @@ from l2e_studio.scenes import Scene
 from l2e_studio.synth import SynthConfig, config_with, make_rig, make_scene, write_dataset
 
 SMALL = config_with(SynthConfig(), n_scenes=4, width=640, height=360, points_per_scan=20_000, seed=11)
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata"
+#: the real recordings beside the project (``$L2E_REALDATA`` points elsewhere, e.g. from a git worktree)
+REALDATA = Path(os.environ.get("L2E_REALDATA") or Path(__file__).resolve().parents[2] / "shared" / "realdata")
 
 
 @pytest.fixture(scope="session")

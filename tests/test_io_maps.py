@@ -64,6 +64,17 @@ def test_grey_png_kind_from_name_and_override(tmp_path: Path) -> None:
         load_map(path, kind="lidar")
 
 
+def test_the_image_folder_decides_even_in_a_data_set_named_event(tmp_path: Path) -> None:
+    # a sparse grey frame (mostly black, few levels) under rig_event/image/ is a camera image:
+    # the map folder names the kind, not the data set's folder
+    path = tmp_path / "lcecalib_rles01_event" / "image" / "00000.png"
+    path.parent.mkdir(parents=True)
+    cv2.imwrite(str(path), _counts())
+    assert guess_kind(path) == "image" and load_map(path)[1] == "image"
+    assert guess_kind(tmp_path / "rig" / "event" / "00000.png") == "events"
+    assert guess_kind(tmp_path / "rig_event" / "maps" / "00000.png") == "events"
+
+
 def test_2d_npy_map(tmp_path: Path) -> None:
     counts = _counts().astype(np.float32) * 1.5
     np.save(tmp_path / "event_0.npy", counts)

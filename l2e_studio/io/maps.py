@@ -13,7 +13,7 @@
 How the kind is decided when ``kind`` is not given: raw event files are ``"events"``; JPEGs
 and colour images (3 or 4 channels) are ``"image"``; a single-channel image is ``"events"``
 when its file name or one of its two parent folders contains "event" (the reference layout
-``DIR/event/<stem>.png``), ``"image"`` otherwise. Values are returned unclipped and
+``DIR/event/<stem>.png``) and its folder is not ``image/``/``images/``, ``"image"`` otherwise. Values are returned unclipped and
 unsmoothed: :func:`l2e_studio.objective.prepare_map` does that.
 """
 
@@ -77,6 +77,8 @@ def guess_kind(path: str | Path, channels: int = 1) -> str:
     if suffix is not None and suffix not in IMAGE_SUFFIXES and suffix != ".npy":
         return "events"
     if suffix in (".jpg", ".jpeg") or channels >= 3:
+        return "image"
+    if path.parent.name.lower() in ("image", "images"):  # the map folder says so (a data set may be named "..._event")
         return "image"
     names = [path.name, path.parent.name, path.parent.parent.name]
     return "events" if any("event" in n.lower() for n in names) else "image"
