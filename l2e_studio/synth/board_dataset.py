@@ -14,7 +14,6 @@ Everything comes from ``seed``: the same seed writes the same folder.
 
 from __future__ import annotations
 
-import shutil
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -30,7 +29,7 @@ from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 from .board import Board, pixel_rays
 from .board_views import IMAGE_MODALITIES, MODALITIES, render_view
 from .board_world import LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
-from .dataset import check_out_dir, perturb, scene_stem
+from .dataset import clear_out_dir, perturb, scene_stem
 
 LENSES = ("radtan", "equidistant")
 
@@ -151,11 +150,7 @@ def write_target_dataset(out_dir: str | Path, config: TargetConfig = TargetConfi
     import cv2
 
     out = Path(out_dir)
-    if check_out_dir(out, overwrite):
-        for sub in ("event", "image", "lidar"):
-            for old in (out / sub).glob("scene_*"):
-                old.unlink()
-        shutil.rmtree(out / ".l2e_cache", ignore_errors=True)
+    clear_out_dir(out, overwrite)
     map_dir = "image" if config.modality in IMAGE_MODALITIES else "event"
     for sub in (map_dir, "lidar"):
         (out / sub).mkdir(parents=True, exist_ok=True)

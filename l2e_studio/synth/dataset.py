@@ -264,11 +264,7 @@ def write_dataset(
     import cv2
 
     out = Path(out_dir)
-    if check_out_dir(out, overwrite):
-        for sub in ("event", "image", "lidar"):
-            for old in (out / sub).glob("scene_*"):
-                old.unlink()
-        shutil.rmtree(out / ".l2e_cache", ignore_errors=True)
+    clear_out_dir(out, overwrite)
     map_dir = "image" if config.map_kind == "image" else "event"
     for sub in (map_dir, "lidar", "config"):
         (out / sub).mkdir(parents=True, exist_ok=True)
@@ -297,6 +293,16 @@ def check_out_dir(out: Path, overwrite: bool = False) -> bool:
     if busy and not overwrite:
         raise InputError(out, "folder is not empty (pass --force to overwrite)")
     return busy
+
+
+def clear_out_dir(out: Path, overwrite: bool = False) -> None:
+    """Make ``out`` ready for a new data set: refused when it is not empty unless ``overwrite``;
+    then the old ``scene_*`` files and the scan cache go first."""
+    if check_out_dir(out, overwrite):
+        for sub in ("event", "image", "lidar"):
+            for old in (out / sub).glob("scene_*"):
+                old.unlink()
+        shutil.rmtree(out / ".l2e_cache", ignore_errors=True)
 
 
 def write_points_txt(path: Path, points: np.ndarray, intensity: np.ndarray) -> None:

@@ -38,7 +38,7 @@ from ..scenes import Scene
 from .board import Board
 from .detect import Detection, detect_cached
 from .lidar import LidarBoard, crop_board, search_board
-from .solve import (EDGE_SIGMA_M, PLANE_SIGMA_M, Observability, Solution, TargetFrame, closed_form, frame_residuals,
+from .solve import (EDGE_SIGMA_M, PLANE_SIGMA_M, Observability, TargetFrame, closed_form, frame_residuals,
                     leave_one_out, observability, residuals_at, solve)
 
 OBJECTIVE = "board planes"  # CalibrationResult.objective of this method; score = -RMS point-to-plane distance (mm)
