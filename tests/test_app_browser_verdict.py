@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import yaml
 
-from app_fixtures import ARTIFACTS, free_port, launch_browser, need_chromium, wait_for, write_small_scenes
+from app_fixtures import ARTIFACTS, free_port, wait_for, write_small_scenes
 from l2e_studio.app.text import score_num
 from l2e_studio.geometry import Extrinsic
 from l2e_studio.verdict import Check, JudgeProgress, Verdict
-from test_app_browser import close_webgl_notice
+from test_app_browser import browser, close_webgl_notice  # noqa: F401 (the fixture)
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(300)]
 SIZE = {"width": 1366, "height": 768}
@@ -42,17 +42,6 @@ def app(scene_set, tmp_path):
     a.set_extrinsic(a.state.reference.perturbed([0.03, -0.02, 0.02], np.radians([0.6, -0.5, 0.4])), "typed")
     yield a
     a.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    need_chromium()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = launch_browser(pw)
-        yield b
-        b.close()
 
 
 @pytest.fixture
