@@ -108,6 +108,10 @@ class Runner:
         self._method: Method | None = None
         self._run_id, self._mask = 0, np.zeros(0, dtype=bool)
         self._scored_best: Extrinsic | None = None  # the last best point put on the common-scale curve
+        # a curve point the run's thread asks for (a stage's start, the result), scored by the
+        # ticker: the run's thread never waits on the readout, so Cancel stops it at once
+        self._pending: tuple[Extrinsic, int] | None = None
+        self._pending_lock = threading.Lock()
 
     def start(self, method: Method) -> int:
         """Start ``method`` on the included scenes from the current extrinsic (RuntimeError while
@@ -122,6 +126,7 @@ class Runner:
         cancel = threading.Event()
         self._cancel, self._method = cancel, method
         self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
+        self._pending = None
         self._score_best()  # the curve starts at the seed, on the readout's scale
 
         stage = [-1]
@@ -130,7 +135,7 @@ class Runner:
             app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
             if p.stage != stage[0]:  # every stage (and start) begins with a point on the curve
                 stage[0] = p.stage
-                self._score_best(p.best, p.evaluations)
+                self._ask_curve_point(p.best, p.evaluations)
 
         def work() -> None:
             try:
@@ -138,7 +143,7 @@ class Runner:
                 stack = app.readout.stack.subset(np.asarray(snap.included, dtype=bool))
                 result = method.solve(stack, snap.extrinsic, on_progress, cancel)
                 app.result_maps = maps
-                self._score_best(result.extrinsic, result.evaluations)  # the curve ends on the result
+                self._ask_curve_point(result.extrinsic, result.evaluations)  # the curve ends on the result
                 verdict, judging_cancelled = self._judge(method, stack, result, cancel, run_id)
                 app.state.finish_run(run_id, result, verdict=verdict, judging_cancelled=judging_cancelled)
             except Exception as exc:  # shown to the user; the app keeps running
@@ -209,8 +214,20 @@ class Runner:
             return
         self.app.state.record_best_score(self._run_id, run.evaluations if evaluations is None else evaluations, score)
 
+    def _ask_curve_point(self, best: Extrinsic, evaluations: int) -> None:
+        with self._pending_lock:
+            self._pending = (best, evaluations)
+
+    def _score_pending(self) -> bool:
+        """Score the curve point the run's thread asked for, if any; True if there was one."""
+        with self._pending_lock:
+            pending, self._pending = self._pending, None
+        if pending is not None:
+            self._score_best(*pending)
+        return pending is not None
+
     def _push_progress(self) -> None:
-        if self.app.state.snapshot().run.judging is None:
+        if not self._score_pending() and self.app.state.snapshot().run.judging is None:
             self._score_best()
         snap = self.app.state.snapshot()
         self.app.optimise.show_progress(snap.run)
@@ -221,6 +238,7 @@ class Runner:
         app = self.app
         if self._ticker is not None:
             self._ticker.stop(2.0)
+        self._score_pending()  # the result's point, when the ticker did not get to it
         snap = app.state.snapshot()
         app.optimise.show_progress(snap.run)
         app.optimise.show_running(False)
