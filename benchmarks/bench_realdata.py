@@ -46,23 +46,15 @@ def classify(seed_err: tuple[float, float], end_err: tuple[float, float]) -> str
 
 def board_evidence(rig):
     """For a rig with a checkerboard in view: ``check(verdict, seed) -> verdict`` adding the
-    boards' agreement with what the verdict hands back (target_verdict.board_check); else None."""
+    boards' agreement with what the verdict hands back (target_verdict.with_boards); else None."""
     if rig.board is None:
         return None
-    from l2e_studio.target import board_frames, detect_frames, load_target
-    from l2e_studio.target_verdict import board_check
-    from l2e_studio.verdict import with_check
+    from l2e_studio.target import detect_frames, load_target
+    from l2e_studio.target_verdict import with_boards
 
     board = load_target(rig.board)
     found = detect_frames(rig.scenes, rig.camera, board, use_cache=False)
-
-    def check(v, seed):
-        if not v.trusted:
-            return v
-        frames = board_frames(rig.scenes, rig.camera, board, v.extrinsic, detections=found, use_cache=False)
-        return with_check(v, board_check(v.extrinsic, frames, board), seed)
-
-    return check
+    return lambda v, seed: with_boards(v, seed, rig.scenes, rig.camera, board, detections=found)
 
 
 def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict]:

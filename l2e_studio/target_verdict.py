@@ -21,20 +21,28 @@ Otherwise ``not-trusted`` (the seed is handed back unless the caller asks to kee
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
 from .calibrate import CalibrationResult
+from .camera import CameraModel
+from .errors import InputError
 from .geometry import Extrinsic
-from .target import Board, TargetFrame, frame_residuals
-from .verdict import ON_UNTRUSTED, Check, Verdict
+from .scenes import Scene
+from .target import Board, Detection, TargetSettings, calibrate_target
+from .verdict import ON_UNTRUSTED, Check, Verdict, with_check
 
 NOISE_PLANE_M = 0.03  # RMS point-to-plane: VLP-16 range noise (~1-2 cm) + the camera's board depth error
 NOISE_EDGE_M = 0.03  # RMS edge-to-outline: azimuth step, beam width, mixed returns
 NOISE_REPROJECTION_PX = 1.0  # RMS corner reprojection (px)
 LOO_M, LOO_DEG = 0.01, 0.2  # the most one frame may move the result
 MIN_USED = 6
-BOARD_CHECK_M = 0.03  # a calibration whose board points sit further (RMS) off the camera's planes fails the board check
+MIN_BOARD_IMAGES = 3  # boards in fewer images are no evidence either way
+BOARD_CHECK_DEG, BOARD_CHECK_M = 0.5, 0.03  # the least disagreement with the boards' own solution that fails a result
+BOARD_SIGMAS = 3.76  # sqrt of the chi-square(3 dof) 99.7 % quantile: a disagreement past it is not the boards' noise
+BOARDS_ALONE = TargetSettings(leave_one_out=False)  # the target method as evidence: no leave-one-out needed
+BOARD_LOOSE_DEG = 3.0  # boards whose own rotation is looser (3 sigma, about every axis) than this cannot tell
 
 
 class TargetVerdict(Verdict):
@@ -92,17 +100,43 @@ def judge_target(result: CalibrationResult, on_untrusted: str = "keep-seed") -> 
                          time.perf_counter() - t0)
 
 
-def board_check(extrinsic: Extrinsic, frames: list[TargetFrame], board: Board, limit_m: float = BOARD_CHECK_M) -> Check:
-    """Whether ``extrinsic`` puts the lidar's board points on the camera's board planes (RMS over
-    all frames within ``limit_m``): evidence a targetless optimiser never climbed. ``frames``:
-    :func:`l2e_studio.target.board_frames` of the scenes."""
-    if not frames:
-        return Check("boards agree", False, "no frame with the board found in both sensors")
-    res = [frame_residuals(extrinsic, f, board) for f in frames]
-    n = sum(r.n_points for r in res)
-    rms = float(np.sqrt(sum(r.plane_rms_m**2 * r.n_points for r in res) / n))
-    worst = max(zip(res, frames), key=lambda rf: abs(rf[0].plane_mean_m))
-    return Check("boards agree", rms <= limit_m,
-                 f"the lidar's board points lie {100 * rms:.1f} cm RMS off the camera's board planes over "
-                 f"{len(frames)} frames (limit {100 * limit_m:.0f} cm; worst frame {worst[1].name}: "
-                 f"{100 * worst[0].plane_mean_m:+.1f} cm)")
+def board_check(extrinsic: Extrinsic, boards: CalibrationResult, rotation_only: bool = False) -> Check | None:
+    """Whether ``boards`` (the target method's own result on the same scenes) agrees with
+    ``extrinsic`` (any calibration, e.g. a targetless result): its rotation and, unless
+    ``rotation_only`` (a result whose translation is the seed's), its translation each within
+    ``BOARD_CHECK_DEG`` / ``BOARD_CHECK_M`` or within ``BOARD_SIGMAS`` of the boards' own
+    per-axis uncertainty (the 99.7 % bound of a 3-D normal). Evidence the targetless optimiser
+    never climbed. None when the boards cannot tell: too few frames used, or their own
+    rotation looser than ``BOARD_LOOSE_DEG`` about every axis."""
+    detail = boards.target
+    sd_m, sd_deg = np.asarray(detail.sigma_m, float), np.asarray(detail.sigma_deg, float)
+    n = len(detail.used)
+    if n < MIN_BOARD_IMAGES or boards.cancelled or not np.all(np.isfinite(np.r_[sd_m, sd_deg])) \
+            or 3 * float(np.min(sd_deg)) > BOARD_LOOSE_DEG:
+        return None
+    dt, dw = boards.extrinsic.delta_to(extrinsic)
+    deg, m = float(np.degrees(np.linalg.norm(dw))), float(np.linalg.norm(dt))
+    k_rot = float(np.linalg.norm(np.degrees(dw) / np.maximum(sd_deg, 1e-9)))
+    k_t = float(np.linalg.norm(dt / np.maximum(sd_m, 1e-12)))
+    rot_ok = deg <= BOARD_CHECK_DEG or k_rot <= BOARD_SIGMAS
+    t_ok = rotation_only or m <= BOARD_CHECK_M or k_t <= BOARD_SIGMAS
+    moved = "" if rotation_only else f", its translation {100 * m:.1f} cm ({k_t:.1f} sigma)"
+    return Check("boards agree", bool(rot_ok and t_ok),
+                 f"the boards alone ({n} frames) put the rotation {deg:.2f} deg ({k_rot:.1f} sigma of "
+                 f"theirs){moved} from the one handed back (limits {BOARD_CHECK_DEG:g} deg"
+                 + ("" if rotation_only else f" / {100 * BOARD_CHECK_M:g} cm") + f" or {BOARD_SIGMAS:.1f} sigma)")
+
+
+def with_boards(verdict: Verdict, seed: Extrinsic, scenes: Sequence[Scene], camera: CameraModel, board: Board,
+                detections: Sequence[Detection] | None = None, on_untrusted: str = "keep-seed") -> Verdict:
+    """``verdict`` on any calibration of ``scenes`` with the boards in view as more evidence:
+    the target method run from what it hands back (``detections``, else detected, cached),
+    and :func:`board_check` of the two (the rotation alone for ``trusted-rotation``).
+    A verdict that is not trusted keeps its status, the check listed (how far what it hands
+    back lies from the boards); boards that cannot tell leave the verdict as it is."""
+    try:
+        boards = calibrate_target(scenes, camera, verdict.extrinsic, board, BOARDS_ALONE, detections=detections)
+    except InputError:  # the board in fewer than 3 frames of both sensors: nothing to tell
+        return verdict
+    check = board_check(verdict.extrinsic, boards, rotation_only=verdict.status == "trusted-rotation")
+    return verdict if check is None else with_check(verdict, check, seed, on_untrusted)

@@ -137,3 +137,25 @@ def test_a_checkerboard_run_cancels(app):
     assert app.wait_run(120)
     snap = app.state.snapshot()
     assert snap.run.status == "cancelled" and snap.result.cancelled and snap.verdict is None
+
+
+def test_a_targetless_run_is_checked_against_the_detected_boards(app):
+    """With boards detected, a score-climb run's verdict also weighs the boards (evidence the
+    optimiser never climbed): the check is in the verdict the Result tab and the file show."""
+    from l2e_studio.synth import read_truth
+    from l2e_studio.verdict import Verdict
+
+    check = app.target.evidence()
+    assert check is not None
+    truth = read_truth(app.scene_set.root / "truth.yaml")
+    stack = app.readout.stack
+    wrong = truth.perturbed([0, 0, 0], np.radians([1.5, 0, 0]))
+    judged = check(stack, Verdict("trusted", wrong, False, (), (), 0.0), app.scene_set.seed)
+    assert judged.status == "not-trusted" and judged.reasons[-1].startswith("boards agree")
+    assert check(stack, Verdict("trusted", truth, False, (), (), 0.0), app.scene_set.seed).status == "trusted"
+
+    app.start_run(app.run_settings(), "score climb (targetless)")
+    assert app.wait_run(300)
+    snap = app.state.snapshot()
+    assert snap.run.status == "done" and snap.result.method != "target"
+    assert any(c.name == "boards agree" for c in snap.verdict.checks), [c.name for c in snap.verdict.checks]

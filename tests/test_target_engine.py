@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import cv2
@@ -12,10 +13,9 @@ import pytest
 from l2e_studio.camera import CameraModel
 from l2e_studio.errors import InputError
 from l2e_studio.geometry import Extrinsic, project_points
-from l2e_studio.target import (Board, TargetFrame, board_pose, closed_form, crop_board, detect_board, load_target,
+from l2e_studio.target import (Board, TargetFrame, closed_form, crop_board, detect_board, load_target,
                                observability, search_board, solve)
 from l2e_studio.target.detect import undistort_normalised
-from l2e_studio.target_verdict import board_check
 
 from conftest import REALDATA
 
@@ -146,8 +146,6 @@ def test_solver_recovers_a_known_extrinsic_from_any_seed():
     sol = solve(frames, BOARD, ends[0])
     assert np.all(sol.sigma_m > 0) and np.all(sol.sigma_m < 0.01) and np.all(sol.sigma_deg < 0.2)
     assert observability(frames).observed
-    assert board_check(sol.extrinsic, frames, BOARD).passed
-    assert not board_check(TRUTH.perturbed([0.1, 0, 0.1], [0, 0.05, 0]), frames, BOARD).passed
 
 
 def test_parallel_boards_name_the_unobserved_direction():
@@ -278,3 +276,53 @@ def test_synthetic_sequence_end_to_end_with_exclusion_progress_and_cancel(synth_
     stop.set()
     res3 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, cancel=stop)
     assert res3.cancelled and res3.extrinsic is ss.seed and judge_target(res3).status == "not-trusted"
+
+
+def test_boards_overrule_a_trusted_targetless_verdict_that_disagrees(synth_boards):
+    """with_boards: a trusted (or trusted-rotation) result the boards contradict is not trusted,
+    the seed handed back; one they agree with keeps its status, the check listed; a result
+    already not trusted keeps its status."""
+    from l2e_studio.io.cameras import load_seed
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.target import detect_frames, find_target
+    from l2e_studio.target_verdict import with_boards
+    from l2e_studio.verdict import Verdict
+
+    ss = load_scene_folder(synth_boards)
+    truth, board = load_seed(synth_boards / "truth.yaml"), load_target(find_target(synth_boards))
+    dets = detect_frames(ss.scenes, ss.camera, board)
+
+    def verdict(status, ext):
+        return Verdict(status, ext, False, (), (), 0.0)
+
+    wrong = truth.perturbed([0, 0, 0], np.radians([0, 1.5, 0]))
+    for status in ("trusted", "trusted-rotation"):
+        kept = with_boards(verdict(status, truth), ss.seed, ss.scenes, ss.camera, board, dets)
+        assert kept.status == status and kept.checks[-1].name == "boards agree" and kept.checks[-1].passed
+        out = with_boards(verdict(status, wrong), ss.seed, ss.scenes, ss.camera, board, dets)
+        assert out.status == "not-trusted" and out.kept_seed and out.extrinsic is ss.seed
+        said = re.search(r"put the rotation ([0-9.]+) deg", out.reasons[-1])
+        assert out.reasons[-1].startswith("boards agree") and 1.1 < float(said.group(1)) < 1.9, out.reasons
+    shifted = truth.perturbed([0.08, 0, 0], [0, 0, 0])  # 8 cm off: fails trusted, passes on rotation alone
+    assert with_boards(verdict("trusted", shifted), ss.seed, ss.scenes, ss.camera, board, dets).status == "not-trusted"
+    assert with_boards(verdict("trusted-rotation", shifted), ss.seed, ss.scenes, ss.camera, board, dets).status \
+        == "trusted-rotation"
+    seed_kept = with_boards(verdict("not-trusted", ss.seed), ss.seed, ss.scenes, ss.camera, board, dets)
+    assert seed_kept.status == "not-trusted" and seed_kept.checks[-1].name == "boards agree"  # listed, for the user
+
+
+def test_calibrate_targetless_with_a_board_in_view_checks_the_boards(synth_boards, tmp_path, capsys):
+    """`calibrate --targetless` climbs the score on a board sequence and writes the boards'
+    check into the verdict of the result file."""
+    import yaml
+
+    from l2e_studio.cli import main
+
+    out = tmp_path / "r.yaml"
+    assert main(["calibrate", "--scenes", str(synth_boards), "--targetless", "--out", str(out), "--quiet"]) == 0
+    assert "checked against the board" in capsys.readouterr().err
+    doc = yaml.safe_load(out.read_text())
+    assert doc.get("method", "targetless") != "target" and "target" not in doc
+    status, checks = doc["verdict"]["status"], doc["verdict"]["checks"]
+    if status != "not-trusted":  # trusted results have met the boards
+        assert checks["boards agree"]["passed"] and "the boards alone" in checks["boards agree"]["detail"]

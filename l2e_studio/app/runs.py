@@ -58,15 +58,21 @@ METHOD_NAMES = ("score climb (targetless)", "checkerboard")
 CHECKERBOARD = METHOD_NAMES[1]
 
 
-def targetless(settings: CalibrationSettings) -> Method:
-    """The paper's method: maximise the score over all included scenes, then judge the result."""
+#: More evidence on a verdict: ``(stack, verdict, seed) -> verdict`` (e.g. the boards in view).
+Evidence = Callable[["SceneStack", Verdict, Extrinsic], Verdict]
+
+
+def targetless(settings: CalibrationSettings, evidence: Evidence | None = None) -> Method:
+    """The paper's method: maximise the score over all included scenes, then judge the result
+    (and weigh ``evidence`` the optimiser never climbed, when given)."""
 
     def solve(stack: "SceneStack", seed: Extrinsic, on_progress: OnProgress, cancel: threading.Event) -> CalibrationResult:
         return calibrate(stack, None, seed, settings, on_progress, cancel)
 
     def judge_it(stack: "SceneStack", result: CalibrationResult, cancel: threading.Event,
                  on_judging: OnJudging) -> Verdict | None:
-        return judge(stack, result, settings, cancel=cancel, on_progress=on_judging)
+        verdict = judge(stack, result, settings, cancel=cancel, on_progress=on_judging)
+        return verdict if evidence is None or cancel.is_set() else evidence(stack, verdict, result.seed)
 
     return Method("Optimisation", solve, judge_it,
                   "Judging the result: halves, a second start, a second score...")

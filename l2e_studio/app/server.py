@@ -383,7 +383,7 @@ class App:
             board = self.target.board()
             return self.runner.start(checkerboard(self.scene_set.scenes, self.camera, board,
                                                   self.target.cached_detections(board)))
-        return self.runner.start(targetless(settings))
+        return self.runner.start(targetless(settings, self.target.evidence()))
 
     def run_label(self) -> str:
         """The name of the score the current (or last) run reports."""

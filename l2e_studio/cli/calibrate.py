@@ -30,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target", type=Path,
                    help="checkerboard file (target.yaml: kind, squares, square_m, size_m); calibrates from the board. "
                         "DIR/target.yaml is used when present")
+    p.add_argument("--targetless", action="store_true",
+                   help="climb the score even with a board in view, and check the result against the boards")
     p.add_argument("--out", type=Path, default=Path("l2e_result.yaml"),
                    help="result file, YAML or .json (default: ./l2e_result.yaml; an existing file is kept as a backup)")
     p.add_argument("--method", choices=METHODS, default="SLSQP", help="optimiser (default: SLSQP)")
@@ -97,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     for note in scene_set.notes:
         print(f"note: {note}", file=sys.stderr)
     t_loaded = time.perf_counter()
-    if board_path is not None:
+    if board_path is not None and not args.targetless:
         return run_target(args, scene_set, board_path, board_how, t_start, t_loaded, _progress)
 
     seed = scene_set.seed
@@ -121,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
         with _progress(args.quiet, err) as prog:
             prog.add_task("judging the result (halves, second start, second score)", total=None)
             verdict = judge(stack, result, settings, on_untrusted=args.on_untrusted)
+        if board_path is not None:
+            verdict = _with_boards(verdict, scene_set, board_path, board_how, args)
 
     quality = None
     if args.check:
@@ -151,6 +155,21 @@ def run(args: argparse.Namespace) -> int:
         highlight=False,
     )
     return 0
+
+
+def _with_boards(verdict, scene_set, board_path: Path, how: str, args):
+    """The verdict with the boards in view as evidence the optimiser never climbed."""
+    from rich.console import Console
+
+    from ..target import load_target
+    from ..target_verdict import with_boards
+
+    board = load_target(board_path)
+    print(f"note: the result is checked against the board in {board_path} (from {how})", file=sys.stderr)
+    with _progress(args.quiet, Console(stderr=True)) as prog:
+        prog.add_task("checking the result against the boards", total=None)
+        return with_boards(verdict, scene_set.seed, scene_set.scenes, scene_set.camera, board,
+                           on_untrusted=args.on_untrusted)
 
 
 #: scipy messages of an optimiser that broke down (SLSQP modes 4-7, NaN objectives), as opposed

@@ -28,6 +28,7 @@ from ..workers import LatestWorker
 from ...errors import InputError
 from ...geometry import Extrinsic, project_points
 from ...target import Board, detect_frames, find_target, load_target, scan_rings, search_board
+from ...target_verdict import with_boards
 
 log = logging.getLogger(__name__)
 
@@ -283,6 +284,26 @@ class TargetPanel:
             names = [sc.name for sc in self.app.scene_set.scenes]
             dets = [self.detections.get(n) for n in names]
         return None if any(d is None for d in dets) else dets
+
+    def evidence(self):
+        """The boards as evidence on a targetless verdict (``(stack, verdict, seed) -> verdict``,
+        :func:`l2e_studio.target_verdict.with_boards` over the run's scenes) when a board is set
+        and detected in every frame; else None."""
+        try:
+            board = self.board()
+        except ValueError:
+            return None
+        dets = self.cached_detections(board)
+        if dets is None:
+            return None
+        scenes, camera = self.app.scene_set.scenes, self.app.camera
+
+        def check(stack, verdict, seed):
+            names = set(stack.names)
+            used = [i for i, sc in enumerate(scenes) if sc.name in names]
+            return with_boards(verdict, seed, [scenes[i] for i in used], camera, board, [dets[i] for i in used])
+
+        return check
 
     # --- after a run ----------------------------------------------------------------------
     def result_shown(self, result) -> None:
