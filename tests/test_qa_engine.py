@@ -258,3 +258,33 @@ def test_held_out_scenes_that_the_calibration_used_are_flagged():
     assert guardrails.held_out_used(["a"], ["b", "c"]) == []
     w = guardrails.held_out_used(["a", "c"], ["b", "c"])
     assert [x.code for x in w] == ["held_out_used"] and "c" in w[0].message
+
+
+def test_report_crop_is_drawn_afresh_with_points_at_the_figures_size():
+    """The report's 2x crop shows the map enlarged, not the points: one lidar point covers as
+    many pixels in the crop as in the full figure (both are shown at the same width), and it
+    sits where the full figure puts it, enlarged about the window."""
+    from l2e_studio.camera import CameraModel
+    from l2e_studio.qa import figures
+
+    cam = CameraModel(np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]]), 640, 480, np.zeros(5))
+    ext = Extrinsic(np.zeros(3), np.zeros(3))
+    point = np.array([[0.25, 0.1, 4.0]])  # projects to (345, 250)
+    flat = np.full((480, 640), 30.0, np.float32)
+    box = (300, 200, 192, 144)
+    full = figures.overlay(flat, point, np.array([200.0]), ext, cam, map_kind="image")
+    crop = figures.overlay(flat, point, np.array([200.0]), ext, cam, map_kind="image", box=box, factor=2)
+    f = figures.display_factor(cam)
+    assert full.shape[:2] == (480 * f, 640 * f) and crop.shape[:2] == (144 * 2 * f, 192 * 2 * f)
+
+    def disc(img):
+        mask = np.any(img != img[0, 0], axis=2)
+        ys, xs = np.nonzero(mask)
+        return mask.sum(), xs.mean(), ys.mean()
+
+    (n_full, xf, yf), (n_crop, xc, yc) = disc(full), disc(crop)
+    # same size on screen: the crop (384 px) is shown as wide as the full figure (640 px), so its
+    # disc covers (384/640)^2 of the pixels (discs come in whole pixels); a crop of the full
+    # figure enlarged 2x would cover 4x as many
+    assert n_crop <= n_full and n_crop >= 0.3 * n_full, (n_crop, n_full)
+    assert (xc, yc) == pytest.approx(((xf / f - box[0]) * 2 * f, (yf / f - box[1]) * 2 * f), abs=2 * f)

@@ -39,23 +39,27 @@ SHOWN_PX = 520
 
 
 def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ext: Extrinsic, camera: CameraModel,
-            clip: float = 127.0, point_px: float = 2.0, map_kind: str = "events") -> np.ndarray:
+            clip: float = 127.0, point_px: float = 2.0, map_kind: str = "events",
+            box: tuple[int, int, int, int] | None = None, factor: int = 1) -> np.ndarray:
     """The map in grey with the lidar points projected at ``ext`` as discs ``point_px`` across
     when the figure is shown :data:`SHOWN_PX` wide, each with a dark outline; coloured by depth
     on camera images (``map_kind="image"``), by intensity on event maps. Maps narrower than
-    800 px are enlarged by :func:`display_factor` first."""
-    f = display_factor(camera)
+    800 px are enlarged by :func:`display_factor` first. ``box`` (x0, y0, w, h in map pixels):
+    only that window, enlarged ``factor`` times more, the points drawn afresh at the same size
+    on screen (a crop of the full figure would enlarge them too)."""
+    f = display_factor(camera) * factor
+    x0, y0, w, h = box if box is not None else (0, 0, camera.width, camera.height)
     m = np.clip(np.asarray(event_map, np.float32), 0, clip)
-    hi = float(np.percentile(m, 99.5)) or 1.0
-    grey = (np.clip(m / hi, 0, 1) * 200).astype(np.uint8)  # keep the map darker than the points
+    hi = float(np.percentile(m, 99.5)) or 1.0  # of the whole map: a crop reads as the full figure does
+    grey = (np.clip(m[y0:y0 + h, x0:x0 + w] / hi, 0, 1) * 200).astype(np.uint8)  # keep the map darker than the points
     if f > 1:
-        grey = cv2.resize(grey, (camera.width * f, camera.height * f), interpolation=cv2.INTER_NEAREST)
+        grey = cv2.resize(grey, (w * f, h * f), interpolation=cv2.INTER_NEAREST)
     img = cv2.cvtColor(grey, cv2.COLOR_GRAY2RGB)
     cam_pts = ext.transform(np.asarray(points, np.float64))
     front = cam_pts[:, 2] > 0.05
     uv, _ = project_points(cam_pts[front], camera)
     inside = in_image(uv, camera)
-    uv = (uv[inside] + 0.5) * f - 0.5
+    uv = (uv[inside] - (x0, y0) + 0.5) * f - 0.5
     depth = cam_pts[front][inside, 2]
     if map_kind == "events":
         colors = point_table()[np.clip(np.asarray(intensity, np.float64)[front][inside], 0, 255).astype(np.uint8)]
@@ -78,12 +82,6 @@ def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, i
     box[:, W - (w - w // 2):] = -1
     cy, cx = np.unravel_index(int(np.argmax(box)), box.shape)
     return int(cx - w // 2), int(cy - h // 2), w, h
-
-
-def zoom(img: np.ndarray, box: tuple[int, int, int, int], factor: int = 2, scale: int = 1) -> np.ndarray:
-    """The ``box`` (map pixels; the image is the map enlarged ``scale`` times) enlarged ``factor`` times."""
-    x, y, w, h = (v * scale for v in box)
-    return cv2.resize(img[y:y + h, x:x + w], (w * factor, h * factor), interpolation=cv2.INTER_NEAREST)
 
 
 def _fig_uri(fig) -> str:

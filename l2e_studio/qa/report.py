@@ -386,6 +386,8 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         before = figures.overlay(sc.event_map, sc.points, sc.intensity, inp.seed, cam, clip, map_kind=sc.map_kind)
         after = figures.overlay(sc.event_map, sc.points, sc.intensity, ext, cam, clip, map_kind=sc.map_kind)
         box = figures.crop_box(sc.event_map)
+        crops = [figures.overlay(sc.event_map, sc.points, sc.intensity, e, cam, clip, map_kind=sc.map_kind, box=box,
+                                 factor=2) for e in (inp.seed, ext)]
         f = figures.display_factor(cam)
         j = table.scenes.index(sc.name) if sc.name in table.scenes else -1
         mi = (f" - paper's MI seed {_fmt(table.per_scene[0, j])}, result {_fmt(table.per_scene[1, j])}"
@@ -394,8 +396,8 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         add(f"<h3>{_e(sc.name)} ({_e(kind)}){_e(mi)}</h3><div class='pair'>"
             f"<figure><img alt='{_e(sc.name)} seed' src='{figures.data_uri_jpeg(before)}'><figcaption>seed, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
             f"<figure><img alt='{_e(sc.name)} result' src='{figures.data_uri_jpeg(after)}'><figcaption>result, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(figures.zoom(before, box, 2, f), 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_jpeg(figures.zoom(after, box, 2, f), 85)}'><figcaption>result, same crop</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(crops[0], 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x, points at the same size</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_jpeg(crops[1], 85)}'><figcaption>result, same crop</figcaption></figure>"
             "</div>")
 
     # settings and checksums
