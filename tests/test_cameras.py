@@ -133,3 +133,56 @@ def test_bad_seed_files(tmp_path: Path) -> None:
         load_seed(tmp_path / "norot.yaml")
     with pytest.raises(InputError, match="no seed"):
         load_seed(SAMPLES / "ros_camera_info.yaml")
+
+
+def _kitti_numbers(rng):
+    """Made-up KITTI-like matrices: rectified P0..P3 (a stereo baseline in the 4th column),
+    a lidar -> camera-0 transform and a small rectifying rotation."""
+    from scipy.spatial.transform import Rotation
+
+    K = np.array([[707.0, 0, 601.9], [0, 707.0, 183.1], [0, 0, 1]])
+    P = {f"P{i}": K @ np.hstack([np.eye(3), np.array([[b], [0.002 * i], [0.001 * i]])])
+         for i, b in enumerate((0.0, -0.54, 0.06, -0.47))}
+    axes = np.array([[0.0, -1, 0], [0, 0, -1], [1, 0, 0]])  # lidar x forward, y left, z up -> camera z, -x, -y
+    R_lc = Rotation.from_rotvec(rng.normal(0, 0.01, 3)).as_matrix() @ axes
+    Tr = np.hstack([R_lc, np.array([[-0.004], [-0.076], [-0.27]])])
+    R0 = Rotation.from_rotvec(rng.normal(0, 0.005, 3)).as_matrix()
+    return P, Tr, R0
+
+
+@pytest.mark.parametrize("layout", ["odometry", "object"])
+def test_kitti_calib_txt_projects_like_its_matrices(tmp_path, layout):
+    """A KITTI calib.txt read as camera and seed projects lidar points exactly where
+    P2 (R0_rect) Tr puts them, and names a missing line."""
+    from l2e_studio.geometry import project_points
+    from l2e_studio.io.cameras import load_rig, load_seed
+
+    rng = np.random.default_rng(7)
+    P, Tr, R0 = _kitti_numbers(rng)
+    fmt = lambda a: " ".join(f"{v:.12e}" for v in np.ravel(a))  # noqa: E731
+    lines = [f"{k}: {fmt(v)}" for k, v in P.items()]
+    if layout == "odometry":
+        lines.append(f"Tr: {fmt(Tr)}")
+        R0 = np.eye(3)
+    else:
+        lines += [f"R0_rect: {fmt(R0)}", f"Tr_velo_to_cam: {fmt(Tr)}", f"Tr_imu_to_velo: {fmt(Tr)}"]
+    path = tmp_path / "calib.txt"
+    path.write_text("\n".join(lines) + "\n")
+    rig = load_rig(path)
+    cam, seed = rig.camera(1242, 375), load_seed(path)
+    assert rig.format == "KITTI calib.txt (P2)" and np.allclose(cam.D, 0) and rig.seed is not None
+    assert np.allclose(rig.seed.matrix, seed.matrix)
+    pts = np.column_stack([rng.uniform(5, 40, 200), rng.uniform(-10, 10, 200), rng.uniform(-2, 1, 200)])
+    T = np.eye(4)
+    T[:3] = Tr
+    R0h = np.eye(4)
+    R0h[:3, :3] = R0
+    h = P["P2"] @ R0h @ T @ np.vstack([pts.T, np.ones(len(pts))])
+    want = (h[:2] / h[2]).T
+    got, _ = project_points(seed.transform(pts), cam)
+    assert np.isfinite(got).all() and np.abs(got - want).max() < 1e-6
+    # another camera by name; a missing line is one clear error
+    assert not np.allclose(load_rig(path, camera="P3").seed.translation, seed.translation)
+    path.write_text("\n".join(line for line in lines if not line.startswith("P2")) + "\nP1b: 1 2\n")
+    with pytest.raises(InputError, match="calib.txt.*no 'P2:' line|no 'P2:' line"):
+        load_rig(path)

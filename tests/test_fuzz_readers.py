@@ -243,6 +243,9 @@ def _seed_matrix() -> bytes:
     return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in T).encode()
 
 
+KITTI_CALIB = (b"P0: 707 0 601.9 0 0 707 183.1 0 0 0 1 0\n"
+               b"P2: 707 0 601.9 42.4 0 707 183.1 1.4 0 0 1 0.003\n"
+               b"Tr: 0 -1 0 -0.004 0 0 -1 -0.076 1 0 0 -0.27\n")
 STATIC_TF = b"rosrun tf2_ros static_transform_publisher 0.1 0 0 0.5 -0.5 0.5 0.5 camera lidar\n"
 URDF = b'<joint name="cam_lidar" type="fixed">\n  <origin xyz="0.1 0 0" rpy="1.5708 0 1.5708"/>\n' \
        b'  <parent link="camera"/>\n  <child link="lidar"/>\n</joint>\n'
@@ -327,6 +330,9 @@ def targets(tmp: Path) -> list[Target]:
         Target("camera Kalibr .yaml", ".yaml", _rig_kalibr(), load_rig_file, check_rig),
         Target("camera OpenCV .yaml", ".yaml", _rig_opencv(), load_rig_file, check_rig,
                ((b"rows: 3", b"rows: 300000"), (b"rows: 3", b"rows: -3"))),
+        Target("camera KITTI calib.txt", ".txt", KITTI_CALIB, load_rig_file, check_rig,
+               ((b"707 0 601.9 42.4", b"-707 0 601.9 42.4"), (b"Tr: 0 -1 0", b"Tr: 0 -1e30 0"))),
+        Target("seed KITTI calib.txt", ".txt", KITTI_CALIB, load_seed_file, check_seed),
         Target("seed matrix .txt", ".txt", _seed_matrix(), load_seed_file, check_seed),
         Target("seed static_transform_publisher", ".txt", STATIC_TF, load_seed_file, check_seed,
                ((b"0.5 -0.5 0.5 0.5", b"0 0 0 0"), (b"0.5 -0.5 0.5 0.5", b"nan 0 0 1"))),

@@ -15,7 +15,10 @@
 * ROS ``camera_info`` YAML (``image_width``, ``camera_matrix: {rows, cols, data}``,
   ``distortion_model: plumb_bob | rational_polynomial | equidistant``, ``distortion_coefficients``);
 * OpenCalib (SensorsCalibration) ``*-intrinsic.json`` (``param.cam_K``, ``param.cam_dist``) and
-  ``calib.txt`` (``K:``, ``D:``, ``T:`` lines, T = lidar -> camera 3x4).
+  ``calib.txt`` (``K:``, ``D:``, ``T:`` lines, T = lidar -> camera 3x4);
+* KITTI ``calib.txt`` (odometry and object: ``P0:``..``P3:``, ``Tr:`` or ``R0_rect:`` +
+  ``Tr_velo_to_cam:``): the rectified camera ``P2`` (or the one named by ``camera=``), no
+  distortion, no image size (it comes from the maps); the seed lidar -> that camera.
 
 :func:`load_seed` reads a seed ``T_cam_lidar`` from any of those, from a result file written
 by :mod:`l2e_studio.export` (``T_cam_lidar`` 4x4), an OpenCalib extrinsic json
@@ -83,6 +86,8 @@ def load_rig(path: str | Path, camera: str | None = None) -> RigFile:
     path = Path(path)
     doc = _read_document(path)
     if isinstance(doc, str):  # a text format
+        if KITTI_TEXT.search(doc):
+            return _kitti_txt(path, doc, camera)
         if re.search(r"^\s*K\s*:", doc, re.MULTILINE):
             return _opencalib_txt(path, doc)
         raise InputError(path, "unknown camera file format (not YAML/JSON with camera intrinsics)")
@@ -120,6 +125,11 @@ def load_seed(path: str | Path) -> Extrinsic:
             return special
     doc = _read_document(path)
     if isinstance(doc, str):
+        if KITTI_TEXT.search(doc):
+            seed = _kitti_txt(path, doc).seed
+            if seed is None:
+                raise InputError(path, "a KITTI calib.txt without a 'Tr:' or 'Tr_velo_to_cam:' line has no seed")
+            return seed
         if re.search(r"^\s*T\s*:", doc, re.MULTILINE):
             seed = _opencalib_txt(path, doc).seed
             assert seed is not None
@@ -167,8 +177,8 @@ def _read_document(path: Path) -> Any:
         raise InputError(path, f"invalid YAML ({str(exc).splitlines()[0]})") from None
     if isinstance(doc, (str, int, float)) or doc is None:
         return text
-    if isinstance(doc, dict) and "K" in doc and isinstance(doc["K"], str):
-        return text  # OpenCalib calib.txt happens to parse as YAML with string values
+    if isinstance(doc, dict) and any(isinstance(doc.get(k), str) for k in ("K", *KITTI_CAMERAS)):
+        return text  # OpenCalib's and KITTI's calib.txt happen to parse as YAML with string values
     return doc
 
 
@@ -487,21 +497,60 @@ def _opencalib_intrinsic(path: Path, doc: dict) -> RigFile:
                    "OpenCalib intrinsic json")
 
 
-def _opencalib_txt(path: Path, text: str) -> RigFile:
+def _text_rows(path: Path, text: str) -> dict[str, np.ndarray]:
+    """The ``NAME: numbers`` lines of a calibration text file."""
     rows: dict[str, np.ndarray] = {}
     for line in text.splitlines():
-        m = re.match(r"^\s*([A-Za-z_]+)\s*:\s*(.*)$", line)
+        m = re.match(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:\s*(.*)$", line)
         if m:
             try:
                 rows[m.group(1)] = np.array(m.group(2).replace(",", " ").split(), dtype=np.float64)
             except ValueError:
                 raise InputError(path, f"line {m.group(1)!r} is not numeric") from None
+    return rows
+
+
+def _opencalib_txt(path: Path, text: str) -> RigFile:
+    rows = _text_rows(path, text)
     if "K" not in rows:
         raise InputError(path, "no 'K:' line (9 numbers, row-major)")
     K = _check_K(path, _matrix(path, rows["K"], (3, 3), "K"))
     D = _distortion(path, _vector(path, rows.get("D"), "D"), "radtan")
     seed = _extrinsic_from_matrix(path, rows["T"]) if "T" in rows else None
     return RigFile(K, D, "radtan", None, None, seed, path, "OpenCalib calib.txt")
+
+
+#: A KITTI calib.txt: projection matrices ``P0:``..``P3:`` and the lidar transform.
+KITTI_TEXT = re.compile(r"^\s*P[0-3]\s*:", re.MULTILINE)
+KITTI_CAMERAS = ("P0", "P1", "P2", "P3")
+
+
+def _kitti_txt(path: Path, text: str, camera: str | None = None) -> RigFile:
+    """KITTI's ``calib.txt`` (odometry: ``P0..P3``, ``Tr``; object: also ``R0_rect``,
+    ``Tr_velo_to_cam``): the rectified camera ``camera`` (default ``P2``, the left colour
+    camera) with no distortion, and the lidar -> that camera as the seed: ``P = K [I | o]``
+    gives ``T = [I | o] R0_rect Tr`` (``R0_rect`` the identity when absent)."""
+    rows = _text_rows(path, text)
+    name = camera or "P2"
+    if name not in KITTI_CAMERAS:
+        raise InputError(path, f"camera {name!r}: a KITTI calib.txt names P0, P1, P2 or P3")
+    if name not in rows:
+        raise InputError(path, f"no '{name}:' line (12 numbers, the 3x4 projection matrix)")
+    P = _matrix(path, rows[name], (3, 4), name)
+    K = _check_K(path, P[:, :3].copy())
+    offset = np.linalg.solve(K, P[:, 3])
+    seed = None
+    tr = next((k for k in ("Tr_velo_to_cam", "Tr") if k in rows), None)
+    if tr is not None:
+        T = np.eye(4)
+        T[:3] = _matrix(path, rows[tr], (3, 4), tr)
+        R0 = np.eye(4)
+        if "R0_rect" in rows:
+            R0[:3, :3] = _matrix(path, rows["R0_rect"], (3, 3), "R0_rect")
+        shift = np.eye(4)
+        shift[:3, 3] = offset
+        seed = _extrinsic_from_matrix(path, shift @ R0 @ T)
+    return RigFile(K, np.zeros(5), "radtan", None, None, seed, path, f"KITTI calib.txt ({name})")
 
 
 _READERS = [
