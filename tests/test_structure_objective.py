@@ -178,6 +178,10 @@ def test_a_rival_peak_nearly_as_high_makes_the_answer_ambiguous():
     assert rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6), (near, 0.99)))).passed
     check = rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.93))))
     assert "93 %" in check.detail and f"{2.5 * RIVAL_DEG:.1f} deg" in check.detail
+    # a second peak 1.5 deg away at 85 % (OpenCalib's two-scene rig): further apart than two
+    # answers may be and still agree, scored alike: not a single answer
+    second = Extrinsic(np.radians([1.5, 0.0, 0.0]), np.zeros(3))
+    assert not rival_check(dc_replace(base, ends=((res, 1.0), (second, 0.85)))).passed
 
 
 def test_translation_axes_name_what_to_record() -> None:
