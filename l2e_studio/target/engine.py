@@ -198,7 +198,7 @@ def board_frames(scenes: Sequence[Scene], camera: CameraModel, board: Board, ext
         if det.found:
             lb = search_board(sc.points, scan_rings(sc), det, board, extrinsic, settings.seed_deg, settings.seed_m)
             if lb.found:
-                out.append(TargetFrame(sc.name, det.pose, lb.points, lb.edges))
+                out.append(TargetFrame(sc.name, det.pose, lb.points, lb.edges, lb.azimuth_step_rad))
     return out
 
 
@@ -246,7 +246,8 @@ def calibrate_target(
                                f"(at least {MIN_FRAMES} are needed)" + ("; " + "; ".join(lines) if lines else ""))
 
     def frames_of(names):
-        return [TargetFrame(n, by_name[n][1].pose, boards[n].points, boards[n].edges) for n in names]
+        return [TargetFrame(n, by_name[n][1].pose, boards[n].points, boards[n].edges,
+                            boards[n].azimuth_step_rad) for n in names]
 
     current, sol, left_out = seed, None, {}
     if not _cancelled(cancel):
@@ -287,7 +288,7 @@ def calibrate_target(
                   f"no board in the lidar scan: {lb.reason}" if not lb.found else left_out.get(sc.name, ""))
         res = None
         if lb.found and det.found:
-            res = frame_residuals(current, TargetFrame(sc.name, det.pose, lb.points, lb.edges), board)
+            res = frame_residuals(current, TargetFrame(sc.name, det.pose, lb.points, lb.edges, lb.azimuth_step_rad), board)
         moved = loo.get(sc.name, (np.nan, np.nan))
         records.append(FrameRecord(sc.name, det, lb, sc.name in used, reason,
                                    *(np.nan,) * 3 if res is None else (res.plane_rms_m, res.plane_mean_m, res.edge_rms_m),

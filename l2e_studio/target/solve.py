@@ -12,10 +12,11 @@ Each board counts as one observation of each (see :func:`_stack` for the scales 
 :func:`closed_form` estimates the extrinsic from the planes alone (rotation aligning the lidar
 normals to the camera normals by SVD, translation by linear least squares on the plane
 offsets), so the seed only has to find the boards. :func:`solve` refines all frames together
-(``scipy.optimize.least_squares``). Its uncertainty is the
-frame-clustered sandwich covariance (the residuals of one board share that board's camera-pose
-error, so they are not independent: the clustered form counts frames, not points), scaled by
-the residuals. :func:`observability` finds the direction the board normals leave unobserved.
+(``scipy.optimize.least_squares``). Its uncertainty (:func:`covariance_of`) covers two
+measures: the frame-clustered sandwich covariance (the residuals of one board share that
+board's camera-pose error, so they are not independent: the clustered form counts frames, not
+points) and the lidar's own measured noise carried through the solve (a floor: ten frames'
+scatter alone is a 4-dof estimate that falls well below the truth one time in four). :func:`observability` finds the direction the board normals leave unobserved.
 """
 
 from __future__ import annotations
@@ -45,12 +46,14 @@ AXES = ("x (right)", "y (down)", "z (forward)")
 @dataclass(frozen=True)
 class TargetFrame:
     """One frame's board as the solver sees it: ``pose`` = ``T_cam_board`` from the camera,
-    ``points`` (N, 3) and ``edges`` (M, 3) on the board in the lidar frame."""
+    ``points`` (N, 3) and ``edges`` (M, 3) on the board in the lidar frame, ``edge_step_rad``
+    the rings' azimuth step there (an edge point is known to within a step along its ring)."""
 
     name: str
     pose: Extrinsic
     points: np.ndarray
     edges: np.ndarray
+    edge_step_rad: float = 0.0
 
     @cached_property
     def pose_R(self) -> np.ndarray:
@@ -61,6 +64,12 @@ class TargetFrame:
         """The board's normal in the camera frame, towards the camera."""
         n = self.pose_R[:, 2]
         return -n if n @ self.pose.translation > 0 else n
+
+    @cached_property
+    def lidar_rms(self) -> float:
+        """RMS distance of the lidar points to their own plane (m): the lidar's range noise there."""
+        n, d = _plane(self.points)
+        return float(np.sqrt(np.mean((self.points @ n - d) ** 2)))
 
     @cached_property
     def lidar_normal(self) -> np.ndarray:
@@ -223,7 +232,7 @@ def solve(frames: list[TargetFrame], board: Board, start: Extrinsic, use_edges: 
     ext = start.perturbed(res.x[:3], res.x[3:])
     cov = np.full((6, 6), np.nan)
     if covariance:
-        cov = clustered_covariance(ext, frames, board, use_edges)
+        cov = covariance_of(ext, frames, board, use_edges)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     return Solution(ext, cov, sd[:3], np.degrees(sd[3:]), float(res.cost), int(res.nfev), str(res.message))
 
@@ -240,12 +249,38 @@ def linearised(ext: Extrinsic, frames, board, use_edges: bool = True) -> tuple[n
     return J, r0, groups
 
 
-def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
+def covariance_of(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
+    """The covariance of a correction ``(dt, dw)`` of the solution ``ext`` (m, rad): the smallest
+    that covers both :func:`clustered_covariance` (the frames' actual scatter, which holds
+    whatever the error is, but is itself uncertain with few frames) and
+    :func:`noise_covariance` (what the lidar's own measured noise alone allows: a floor the
+    scatter of 10 frames can fall below by chance)."""
+    lin = linearised(ext, frames, board, use_edges)
+    return covering(clustered_covariance(ext, frames, board, use_edges, lin),
+                    noise_covariance(ext, frames, board, use_edges, lin))
+
+
+def covering(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest covariance ``C >= a`` and ``C >= b`` along the eigenvectors of ``b^-1/2 a b^-1/2``
+    (variances along every direction the larger of the two)."""
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return np.full((6, 6), np.inf)
+    w, v = np.linalg.eigh(b)
+    if w.min() <= 0:
+        return a
+    half = v @ np.diag(np.sqrt(w)) @ v.T
+    inv_half = v @ np.diag(1.0 / np.sqrt(w)) @ v.T
+    m, u = np.linalg.eigh(inv_half @ a @ inv_half)
+    return half @ u @ np.diag(np.maximum(m, 1.0)) @ u.T @ half
+
+
+def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True, lin=None) -> np.ndarray:
     """The frame-clustered sandwich covariance of a correction ``(dt, dw)`` of ``ext`` (m, rad):
     ``A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the sum over frames of the outer products of
-    their gradients ``J_f^T r_f``; small-sample factor ``k / (k - 6)`` for k frames. It takes the
-    frames' actual scatter, not the assumed noise, as the measure."""
-    J, r0, groups = linearised(ext, frames, board, use_edges)
+    their gradients ``J_f^T r_f``, with the usual small-sample factor ``k / (k - 1)`` for k
+    frames. It takes the frames' actual scatter, not the assumed noise, as the measure.
+    ``lin``: :func:`linearised` at ``ext`` when already computed."""
+    J, r0, groups = linearised(ext, frames, board, use_edges) if lin is None else lin
     A = J.T @ J
     B = np.zeros((6, 6))
     for g in np.unique(groups):
@@ -257,7 +292,47 @@ def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) 
         Ai = np.linalg.inv(A)
     except np.linalg.LinAlgError:
         return np.full((6, 6), np.inf)
-    return Ai @ B @ Ai * (k / max(k - 6, 1))
+    return Ai @ B @ Ai * (k / max(k - 1, 1))
+
+
+def noise_covariance(ext: Extrinsic, frames, board, use_edges: bool = True, lin=None,
+                     replicates: int = 64, seed: int = 0) -> np.ndarray:
+    """The covariance of the solution under the lidar's own noise alone (m, rad), by simulation:
+    each frame's points moved along their rays by Gaussian noise of that frame's measured RMS
+    off its own plane, its edge points also along their ring by up to half an azimuth step either
+    way (where a ring leaves the board is known to a step), then one Gauss-Newton step from
+    ``ext``. ``replicates`` draws (``seed``: the same frames give the same answer)."""
+    J, r0, _ = linearised(ext, frames, board, use_edges) if lin is None else lin
+    try:
+        pinv = np.linalg.solve(J.T @ J, J.T)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.inf)
+    rng = np.random.default_rng(seed)
+    steps = np.empty((replicates, 6))
+    for k in range(replicates):
+        noisy = [_jittered(f, rng) for f in frames]
+        steps[k] = -pinv @ (_stack(np.zeros(6), ext, noisy, board, use_edges)[0] - r0)
+    return np.cov(steps, rowvar=False)
+
+
+def _jittered(f: TargetFrame, rng: np.random.Generator) -> TargetFrame:
+    """``f`` with fresh lidar noise: range noise along the rays scaled so that it puts the points
+    ``f.lidar_rms`` off their plane; the edge points also moved along their ring."""
+    def along_rays(p: np.ndarray, sigma: float) -> np.ndarray:
+        r = np.linalg.norm(p, axis=1, keepdims=True)
+        return p + p / np.maximum(r, 1e-9) * rng.normal(0.0, sigma, (len(p), 1))
+
+    rays = f.points / np.maximum(np.linalg.norm(f.points, axis=1, keepdims=True), 1e-9)
+    cos = np.sqrt(np.mean((rays @ f.lidar_normal) ** 2))
+    sigma = f.lidar_rms / max(cos, 0.2)
+    edges = f.edges
+    if len(edges):
+        step = f.edge_step_rad if np.isfinite(f.edge_step_rad) else 0.0
+        a = rng.uniform(-step / 2, step / 2, len(edges))
+        c, s = np.cos(a), np.sin(a)
+        edges = np.column_stack([c * edges[:, 0] - s * edges[:, 1], s * edges[:, 0] + c * edges[:, 1], edges[:, 2]])
+        edges = along_rays(edges, sigma)
+    return TargetFrame(f.name, f.pose, along_rays(f.points, sigma), edges, f.edge_step_rad)
 
 
 def leave_one_out(ext: Extrinsic, frames, board, use_edges: bool = True) -> list[tuple[float, float]]:
