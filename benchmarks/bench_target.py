@@ -2,7 +2,7 @@
 distance to the references, half-splits against the reported sigma, and time.
 
     PYTHONPATH=$PWD python benchmarks/bench_target.py [--realdata ../shared/realdata] [--runs 10] [--halves 10]
-        [--synthetic 3] [--calibration 30] [--synth-dir DIR] [--sets NAMES]
+        [--synthetic 3] [--calibration 30] [--floor 20] [--synth-dir DIR] [--sets NAMES]
 
 Per set: ``--runs`` seeds 2 deg / 10 cm and as many 5 deg / 20 cm off the reference (uniform
 direction, that norm), the spread of the results (max distance to their median, mm / deg), how
@@ -10,7 +10,8 @@ many were judged trusted, the share of frames with a detected board; the rles01 
 results against each other; each against reference.yaml and lcecalib_estimate.yaml;
 ``--halves`` random halves of the frames: spread per axis against the sigma each half reported;
 the time for a whole run with detection, cold (no cache) and cached. ``--calibration N``: the
-reported sigma against the true error over N synthetic sequences per modality.
+reported sigma against the true error over N synthetic sequences per modality; ``--floor N``:
+the median error the lidar's noise allows (Cramer-Rao) against the solver's.
 """
 
 from __future__ import annotations
@@ -113,6 +114,51 @@ def calibration(count: int, folder: Path) -> None:
               f"({1000 * ACCURACY_M:.0f} mm, {ACCURACY_DEG:g} deg per axis): {wrong}")
 
 
+def information_floor(count: int, folder: Path) -> None:
+    """What the lidar's noise allows on ``count`` synthetic frame-camera sequences: the
+    Cramer-Rao bound of the extrinsic from every board point against the TRUE board plane and
+    every edge point against the true outline (the camera's boards taken as exact; per point the
+    frame's measured RMS off its plane, edge points also a uniform azimuth step), as the median
+    error a Gaussian of that covariance gives; against the solver's actual median error."""
+    from l2e_studio.synth.board_dataset import read_board_poses
+    from l2e_studio.target import TargetFrame
+    from l2e_studio.target.solve import residuals_at
+
+    print(f"== information floor ({count} synthetic frame-camera sequences)")
+    rng = np.random.default_rng(0)
+    floors, actual = [], []
+    for k in range(count):
+        truth, r = synthetic_run("frame", k, folder)
+        if r is None:
+            continue
+        poses = read_board_poses(folder / f"frame{k}" / "truth.yaml")
+        frames = [TargetFrame(f.name, poses[f.name], f.lidar.points, f.lidar.edges, f.lidar.azimuth_step_rad)
+                  for f in r.target.used]
+        board = r.target.board
+
+        def weighted(x: np.ndarray) -> np.ndarray:
+            ext = truth.perturbed(x[:3], x[3:])
+            out = []
+            for f in frames:
+                plane, edge = residuals_at(ext, f, board)
+                out.append(plane / f.lidar_rms)
+                if len(edge):
+                    reach = f.edge_step_rad * np.linalg.norm(f.edges, axis=1)
+                    out.append(edge / np.sqrt(reach**2 / 12 + f.lidar_rms**2))
+            return np.concatenate(out)
+
+        J = np.column_stack([(weighted(h) - weighted(-h)) / 2e-6 for h in 1e-6 * np.eye(6)])
+        sd = np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
+        draws = rng.standard_normal((4000, 6)) * sd
+        floors.append((1000 * np.median(np.linalg.norm(draws[:, :3], axis=1)),
+                       np.degrees(np.median(np.linalg.norm(draws[:, 3:], axis=1)))))
+        g, m = truth.error_to(r.extrinsic)
+        actual.append((1000 * m, g))
+    f, a = np.median(floors, axis=0), np.median(actual, axis=0)
+    print(f"   median error the noise allows {f[0]:.2f} mm / {f[1]:.3f} deg; the solver's {a[0]:.2f} mm / {a[1]:.3f} deg "
+          f"over {len(actual)} sequences")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--realdata", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "realdata")
@@ -121,6 +167,8 @@ def main() -> None:
     ap.add_argument("--synthetic", type=int, default=3, help="synthetic sequences per modality (l2e-studio synth --target)")
     ap.add_argument("--calibration", type=int, default=0,
                     help="synthetic sequences per modality for the sigma calibration (0: skip)")
+    ap.add_argument("--floor", type=int, default=0,
+                    help="synthetic frame sequences for the information floor (Cramer-Rao; 0: skip)")
     ap.add_argument("--synth-dir", type=Path, default=None,
                     help="keep the synthetic sequences here and reuse those already written (default: a temporary folder)")
     ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three; '' for none)")
@@ -131,6 +179,8 @@ def main() -> None:
             synthetic(args.synthetic, folder)
         if args.calibration:
             calibration(args.calibration, folder)
+        if args.floor:
+            information_floor(args.floor, folder)
     results = {}
     for name in filter(None, args.sets.split(",")):
         folder = args.realdata / name
