@@ -288,7 +288,7 @@ def calibrate_target(
                   f"no board in the lidar scan: {lb.reason}" if not lb.found else left_out.get(sc.name, ""))
         res = None
         if lb.found and det.found:
-            res = frame_residuals(current, TargetFrame(sc.name, det.pose, lb.points, lb.edges, lb.azimuth_step_rad), board)
+            res = frame_residuals(current, TargetFrame(sc.name, det.pose, lb.points, lb.edges), board)
         moved = loo.get(sc.name, (np.nan, np.nan))
         records.append(FrameRecord(sc.name, det, lb, sc.name in used, reason,
                                    *(np.nan,) * 3 if res is None else (res.plane_rms_m, res.plane_mean_m, res.edge_rms_m),

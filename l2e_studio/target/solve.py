@@ -15,8 +15,9 @@ offsets), so the seed only has to find the boards. :func:`solve` refines all fra
 (``scipy.optimize.least_squares``). Its uncertainty (:func:`covariance_of`) covers two
 measures: the frame-clustered sandwich covariance (the residuals of one board share that
 board's camera-pose error, so they are not independent: the clustered form counts frames, not
-points) and the lidar's own measured noise carried through the solve (a floor: ten frames'
-scatter alone is a 4-dof estimate that falls well below the truth one time in four). :func:`observability` finds the direction the board normals leave unobserved.
+points) and the lidar's own measured noise carried through the solve (a floor: the scatter of
+ten frames is itself an estimate of a few degrees of freedom and falls below the true error by
+chance). :func:`observability` finds the direction the board normals leave unobserved.
 """
 
 from __future__ import annotations
@@ -66,15 +67,19 @@ class TargetFrame:
         return -n if n @ self.pose.translation > 0 else n
 
     @cached_property
-    def lidar_rms(self) -> float:
-        """RMS distance of the lidar points to their own plane (m): the lidar's range noise there."""
-        n, d = _plane(self.points)
-        return float(np.sqrt(np.mean((self.points @ n - d) ** 2)))
+    def lidar_plane(self) -> tuple[np.ndarray, float]:
+        """The lidar points' plane ``n . p = d`` (lidar frame, n towards the sensor)."""
+        return _plane(self.points)
+
+    @property
+    def lidar_normal(self) -> np.ndarray:
+        return self.lidar_plane[0]
 
     @cached_property
-    def lidar_normal(self) -> np.ndarray:
-        """The lidar points' plane normal (lidar frame, towards the sensor)."""
-        return _plane(self.points)[0]
+    def lidar_rms(self) -> float:
+        """RMS distance of the lidar points to their own plane (m): the lidar's range noise there."""
+        n, d = self.lidar_plane
+        return float(np.sqrt(np.mean((self.points @ n - d) ** 2)))
 
     @cached_property
     def centroid(self) -> np.ndarray:
