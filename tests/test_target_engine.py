@@ -267,6 +267,10 @@ def test_synthetic_sequence_end_to_end_with_exclusion_progress_and_cancel(synth_
     assert ss.seed.error_to(truth)[0] > deg  # better than the seed it started from
     assert {p.stage for p in seen} == {0, 1, 2} and seen[-1].fraction == 1.0
     assert judge_target(res).status == "trusted"
+    # the reported sigma covers the true error on every axis (3 sigma)
+    dt, dw = res.extrinsic.delta_to(truth)
+    z = np.concatenate([dt, dw]) / np.concatenate([res.target.sigma_m, np.radians(res.target.sigma_deg)])
+    assert np.all(np.abs(z) < 3), z
     # a frame left out by the user: reported, not used, and the answer changes
     name = ss.scenes[0].name
     res2 = calibrate_target(ss.scenes, ss.camera, ss.seed, board, exclude={name})
