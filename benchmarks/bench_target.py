@@ -2,13 +2,16 @@
 distance to the references, half-splits against the reported sigma, and time.
 
     PYTHONPATH=$PWD python benchmarks/bench_target.py [--realdata ../shared/realdata] [--runs 10] [--halves 10]
+        [--synthetic 3] [--calibration 30] [--floor 20] [--synth-dir DIR] [--sets NAMES]
 
 Per set: ``--runs`` seeds 2 deg / 10 cm and as many 5 deg / 20 cm off the reference (uniform
 direction, that norm), the spread of the results (max distance to their median, mm / deg), how
 many were judged trusted, the share of frames with a detected board; the rles01 frame and event
 results against each other; each against reference.yaml and lcecalib_estimate.yaml;
 ``--halves`` random halves of the frames: spread per axis against the sigma each half reported;
-the time for a whole run with detection, cold (no cache) and cached.
+the time for a whole run with detection, cold (no cache) and cached. ``--calibration N``: the
+reported sigma against the true error over N synthetic sequences per modality; ``--floor N``:
+the median error the lidar's noise allows (Cramer-Rao) against the solver's.
 """
 
 from __future__ import annotations
@@ -46,33 +49,114 @@ def spread(exts: list[Extrinsic]) -> tuple[float, float]:
     return 1000 * max(m for _, m in d), max(g for g, _ in d)
 
 
-def synthetic(count: int) -> None:
-    """Median error against the truth of ``count`` synthetic board sequences (10 poses each) per modality."""
+def synthetic_run(modality: str, k: int, folder: Path):
+    """``(truth, result)`` of the synthetic board sequence ``k`` of ``modality`` (written into
+    ``folder`` unless already there; None for the result when too few boards were found)."""
     from l2e_studio.cli import main as cli
 
+    out = folder / f"{modality}{k}"
+    if not (out / "truth.yaml").is_file():
+        cli(["synth", "--target", "checkerboard", "--modality", modality, "--seed", str(k), "--out", str(out), "--quiet"])
+    ss = load_scene_folder(out)
+    truth, board = load_seed(out / "truth.yaml"), load_target(out / "target.yaml")
+    try:
+        return truth, calibrate_target(ss.scenes, ss.camera, ss.seed, board)
+    except ValueError:  # InputError: too few boards found
+        return truth, None
+
+
+def synthetic(count: int, folder: Path) -> None:
+    """Median error against the truth of ``count`` synthetic board sequences (10 poses each) per modality."""
     print(f"== synthetic boards (l2e-studio synth --target checkerboard, 10 poses, {count} sequences per modality)")
-    with tempfile.TemporaryDirectory() as tmp:
-        for modality in ("frame", "e2vid", "events", "events-moving"):
-            errs, trusted, rates, fails = [], 0, [], []
-            for k in range(count):
-                out = Path(tmp) / f"{modality}{k}"
-                cli(["synth", "--target", "checkerboard", "--modality", modality, "--seed", str(k), "--out", str(out),
-                     "--quiet"])
-                ss = load_scene_folder(out)
-                truth, board = load_seed(out / "truth.yaml"), load_target(out / "target.yaml")
-                try:
-                    r = calibrate_target(ss.scenes, ss.camera, ss.seed, board)
-                except ValueError as exc:  # InputError: too few boards found
-                    fails.append(str(exc)[:80])
-                    continue
-                g, m = truth.error_to(r.extrinsic)
-                errs.append((1000 * m, g))
-                rates.append(r.target.detection_rate)
-                trusted += judge_target(r).status == "trusted"
-            med = np.median(np.array(errs), axis=0) if errs else (np.nan, np.nan)
-            print(f"   {modality}: median error {med[0]:.2f} mm / {med[1]:.3f} deg over {len(errs)} "
-                  f"(each: {', '.join(f'{a:.1f} mm {b:.2f} deg' for a, b in errs)}), trusted {trusted}/{count}, "
-                  f"detected {100 * np.mean(rates) if rates else 0:.0f} %" + (f"; failed: {fails}" if fails else ""))
+    for modality in ("frame", "e2vid", "events", "events-moving"):
+        errs, trusted, rates, fails = [], 0, [], 0
+        for k in range(count):
+            truth, r = synthetic_run(modality, k, folder)
+            if r is None:
+                fails += 1
+                continue
+            g, m = truth.error_to(r.extrinsic)
+            errs.append((1000 * m, g))
+            rates.append(r.target.detection_rate)
+            trusted += judge_target(r).status == "trusted"
+        med = np.median(np.array(errs), axis=0) if errs else (np.nan, np.nan)
+        print(f"   {modality}: median error {med[0]:.2f} mm / {med[1]:.3f} deg over {len(errs)} "
+              f"(each: {', '.join(f'{a:.1f} mm {b:.2f} deg' for a, b in errs)}), trusted {trusted}/{count}, "
+              f"detected {100 * np.mean(rates) if rates else 0:.0f} %" + (f"; {fails} found too few boards" if fails else ""))
+
+
+def calibration(count: int, folder: Path) -> None:
+    """Whether the reported sigma is honest: over ``count`` synthetic sequences per modality, the
+    share of |error| / sigma per axis within 1, 2, 3 (a normal error: 68 / 95 / 99.7 %; Student's
+    t for 9 dof: 66 / 92 / 98.5 %), and how many sequences judged trusted are off by more than
+    the verdict's own limits on some axis."""
+    from l2e_studio.target_verdict import ACCURACY_DEG, ACCURACY_M
+
+    print(f"== sigma calibration ({count} synthetic sequences per modality; error / sigma per axis x y z rx ry rz)")
+    limits = np.array([ACCURACY_M] * 3 + [np.radians(ACCURACY_DEG)] * 3)
+    for modality in ("frame", "e2vid"):
+        z, trusted, wrong = [], 0, 0
+        for k in range(count):
+            truth, r = synthetic_run(modality, k, folder)
+            if r is None:
+                continue
+            dt, dw = r.extrinsic.delta_to(truth)
+            err = np.concatenate([dt, dw])
+            z.append(err / np.concatenate([r.target.sigma_m, np.radians(r.target.sigma_deg)]))
+            if judge_target(r).status == "trusted":
+                trusted += 1
+                wrong += bool(np.any(np.abs(err) > limits))
+        a = np.abs(np.array(z))
+        print(f"   {modality}: within 1 / 2 / 3 sigma " + " / ".join(f"{100 * np.mean(a < q):.0f}" for q in (1, 2, 3))
+              + " %; per axis within 2: " + " ".join(f"{100 * v:.0f}" for v in np.mean(a < 2, axis=0))
+              + " %; RMS error/sigma per axis " + " ".join(f"{v:.2f}" for v in np.sqrt(np.mean(a**2, axis=0)))
+              + f"; trusted {trusted}/{len(z)}, of them off by more than the limits "
+              f"({1000 * ACCURACY_M:.0f} mm, {ACCURACY_DEG:g} deg per axis): {wrong}")
+
+
+def information_floor(count: int, folder: Path) -> None:
+    """What the lidar's noise allows on ``count`` synthetic frame-camera sequences: the
+    Cramer-Rao bound of the extrinsic from every board point against the TRUE board plane and
+    every edge point against the true outline (the camera's boards taken as exact; per point the
+    frame's measured RMS off its plane, edge points also a uniform azimuth step), as the median
+    error a Gaussian of that covariance gives; against the solver's actual median error."""
+    from l2e_studio.synth.board_dataset import read_board_poses
+    from l2e_studio.target import TargetFrame
+    from l2e_studio.target.solve import residuals_at
+
+    print(f"== information floor ({count} synthetic frame-camera sequences)")
+    rng = np.random.default_rng(0)
+    floors, actual = [], []
+    for k in range(count):
+        truth, r = synthetic_run("frame", k, folder)
+        if r is None:
+            continue
+        poses = read_board_poses(folder / f"frame{k}" / "truth.yaml")
+        frames = [TargetFrame(f.name, poses[f.name], f.lidar.points, f.lidar.edges, f.lidar.azimuth_step_rad)
+                  for f in r.target.used]
+        board = r.target.board
+
+        def weighted(x: np.ndarray) -> np.ndarray:
+            ext = truth.perturbed(x[:3], x[3:])
+            out = []
+            for f in frames:
+                plane, edge = residuals_at(ext, f, board)
+                out.append(plane / f.lidar_rms)
+                if len(edge):
+                    reach = f.edge_step_rad * np.linalg.norm(f.edges, axis=1)
+                    out.append(edge / np.sqrt(reach**2 / 12 + f.lidar_rms**2))
+            return np.concatenate(out)
+
+        J = np.column_stack([(weighted(h) - weighted(-h)) / 2e-6 for h in 1e-6 * np.eye(6)])
+        sd = np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
+        draws = rng.standard_normal((4000, 6)) * sd
+        floors.append((1000 * np.median(np.linalg.norm(draws[:, :3], axis=1)),
+                       np.degrees(np.median(np.linalg.norm(draws[:, 3:], axis=1)))))
+        g, m = truth.error_to(r.extrinsic)
+        actual.append((1000 * m, g))
+    f, a = np.median(floors, axis=0), np.median(actual, axis=0)
+    print(f"   median error the noise allows {f[0]:.2f} mm / {f[1]:.3f} deg; the solver's {a[0]:.2f} mm / {a[1]:.3f} deg "
+          f"over {len(actual)} sequences")
 
 
 def main() -> None:
@@ -81,12 +165,24 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--halves", type=int, default=10)
     ap.add_argument("--synthetic", type=int, default=3, help="synthetic sequences per modality (l2e-studio synth --target)")
-    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three)")
+    ap.add_argument("--calibration", type=int, default=0,
+                    help="synthetic sequences per modality for the sigma calibration (0: skip)")
+    ap.add_argument("--floor", type=int, default=0,
+                    help="synthetic frame sequences for the information floor (Cramer-Rao; 0: skip)")
+    ap.add_argument("--synth-dir", type=Path, default=None,
+                    help="keep the synthetic sequences here and reuse those already written (default: a temporary folder)")
+    ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three; '' for none)")
     args = ap.parse_args()
-    if args.synthetic:
-        synthetic(args.synthetic)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = args.synth_dir or Path(tmp)
+        if args.synthetic:
+            synthetic(args.synthetic, folder)
+        if args.calibration:
+            calibration(args.calibration, folder)
+        if args.floor:
+            information_floor(args.floor, folder)
     results = {}
-    for name in args.sets.split(","):
+    for name in filter(None, args.sets.split(",")):
         folder = args.realdata / name
         ss = load_scene_folder(folder, seed_file=folder / "reference.yaml")
         ref, est, board = ss.seed, load_seed(folder / "lcecalib_estimate.yaml"), load_target(folder / "target.yaml")

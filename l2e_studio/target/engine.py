@@ -198,7 +198,7 @@ def board_frames(scenes: Sequence[Scene], camera: CameraModel, board: Board, ext
         if det.found:
             lb = search_board(sc.points, scan_rings(sc), det, board, extrinsic, settings.seed_deg, settings.seed_m)
             if lb.found:
-                out.append(TargetFrame(sc.name, det.pose, lb.points, lb.edges))
+                out.append(TargetFrame(sc.name, det.pose, lb.points, lb.edges, lb.azimuth_step_rad))
     return out
 
 
@@ -246,7 +246,8 @@ def calibrate_target(
                                f"(at least {MIN_FRAMES} are needed)" + ("; " + "; ".join(lines) if lines else ""))
 
     def frames_of(names):
-        return [TargetFrame(n, by_name[n][1].pose, boards[n].points, boards[n].edges) for n in names]
+        return [TargetFrame(n, by_name[n][1].pose, boards[n].points, boards[n].edges,
+                            boards[n].azimuth_step_rad) for n in names]
 
     current, sol, left_out = seed, None, {}
     if not _cancelled(cancel):

@@ -12,15 +12,17 @@ Each board counts as one observation of each (see :func:`_stack` for the scales 
 :func:`closed_form` estimates the extrinsic from the planes alone (rotation aligning the lidar
 normals to the camera normals by SVD, translation by linear least squares on the plane
 offsets), so the seed only has to find the boards. :func:`solve` refines all frames together
-(``scipy.optimize.least_squares``). Its uncertainty is the
-frame-clustered sandwich covariance (the residuals of one board share that board's camera-pose
-error, so they are not independent: the clustered form counts frames, not points), scaled by
-the residuals. :func:`observability` finds the direction the board normals leave unobserved.
+(``scipy.optimize.least_squares``). Its uncertainty (:func:`covariance_of`) covers two
+measures: the frame-clustered sandwich covariance (the residuals of one board share that
+board's camera-pose error, so they are not independent: the clustered form counts frames, not
+points) and the lidar's own measured noise carried through the solve (a floor: the scatter of
+ten frames is itself an estimate of a few degrees of freedom and falls below the true error by
+chance). :func:`observability` finds the direction the board normals leave unobserved.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -45,12 +47,14 @@ AXES = ("x (right)", "y (down)", "z (forward)")
 @dataclass(frozen=True)
 class TargetFrame:
     """One frame's board as the solver sees it: ``pose`` = ``T_cam_board`` from the camera,
-    ``points`` (N, 3) and ``edges`` (M, 3) on the board in the lidar frame."""
+    ``points`` (N, 3) and ``edges`` (M, 3) on the board in the lidar frame, ``edge_step_rad``
+    the rings' azimuth step there (an edge point is known to within a step along its ring)."""
 
     name: str
     pose: Extrinsic
     points: np.ndarray
     edges: np.ndarray
+    edge_step_rad: float = 0.0
 
     @cached_property
     def pose_R(self) -> np.ndarray:
@@ -63,9 +67,19 @@ class TargetFrame:
         return -n if n @ self.pose.translation > 0 else n
 
     @cached_property
+    def lidar_plane(self) -> tuple[np.ndarray, float]:
+        """The lidar points' plane ``n . p = d`` (lidar frame, n towards the sensor)."""
+        return _plane(self.points)
+
+    @property
     def lidar_normal(self) -> np.ndarray:
-        """The lidar points' plane normal (lidar frame, towards the sensor)."""
-        return _plane(self.points)[0]
+        return self.lidar_plane[0]
+
+    @cached_property
+    def lidar_rms(self) -> float:
+        """RMS distance of the lidar points to their own plane (m): the lidar's range noise there."""
+        n, d = self.lidar_plane
+        return float(np.sqrt(np.mean((self.points @ n - d) ** 2)))
 
     @cached_property
     def centroid(self) -> np.ndarray:
@@ -155,7 +169,8 @@ def closed_form(frames: list[TargetFrame], fallback: Extrinsic) -> Extrinsic:
 
 def _plane(points: np.ndarray) -> tuple[np.ndarray, float]:
     c = points.mean(axis=0)
-    n = np.linalg.svd(points - c, full_matrices=False)[2][2]
+    q = points - c
+    n = np.linalg.eigh(q.T @ q)[1][:, 0]  # the scatter's weakest axis (as the SVD's last, at a third of its cost)
     if n @ c > 0:
         n = -n
     return n, float(n @ c)
@@ -223,7 +238,7 @@ def solve(frames: list[TargetFrame], board: Board, start: Extrinsic, use_edges: 
     ext = start.perturbed(res.x[:3], res.x[3:])
     cov = np.full((6, 6), np.nan)
     if covariance:
-        cov = clustered_covariance(ext, frames, board, use_edges)
+        cov = covariance_of(ext, frames, board, use_edges)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     return Solution(ext, cov, sd[:3], np.degrees(sd[3:]), float(res.cost), int(res.nfev), str(res.message))
 
@@ -240,12 +255,38 @@ def linearised(ext: Extrinsic, frames, board, use_edges: bool = True) -> tuple[n
     return J, r0, groups
 
 
-def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
+def covariance_of(ext: Extrinsic, frames, board, use_edges: bool = True) -> np.ndarray:
+    """The covariance of a correction ``(dt, dw)`` of the solution ``ext`` (m, rad): the smallest
+    that covers both :func:`clustered_covariance` (the frames' actual scatter, which holds
+    whatever the error is, but is itself uncertain with few frames) and
+    :func:`noise_covariance` (what the lidar's own measured noise alone allows: a floor the
+    scatter of 10 frames can fall below by chance)."""
+    lin = linearised(ext, frames, board, use_edges)
+    return covering(clustered_covariance(ext, frames, board, use_edges, lin),
+                    noise_covariance(ext, frames, board, use_edges, lin))
+
+
+def covering(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest covariance ``C >= a`` and ``C >= b`` along the eigenvectors of ``b^-1/2 a b^-1/2``
+    (variances along every direction the larger of the two)."""
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return np.full((6, 6), np.inf)
+    w, v = np.linalg.eigh(b)
+    if w.min() <= 0:
+        return a
+    half = v @ np.diag(np.sqrt(w)) @ v.T
+    inv_half = v @ np.diag(1.0 / np.sqrt(w)) @ v.T
+    m, u = np.linalg.eigh(inv_half @ a @ inv_half)
+    return half @ u @ np.diag(np.maximum(m, 1.0)) @ u.T @ half
+
+
+def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True, lin=None) -> np.ndarray:
     """The frame-clustered sandwich covariance of a correction ``(dt, dw)`` of ``ext`` (m, rad):
     ``A^-1 B A^-1`` with ``A = J^T J`` and ``B`` the sum over frames of the outer products of
-    their gradients ``J_f^T r_f``; small-sample factor ``k / (k - 6)`` for k frames. It takes the
-    frames' actual scatter, not the assumed noise, as the measure."""
-    J, r0, groups = linearised(ext, frames, board, use_edges)
+    their gradients ``J_f^T r_f``, with the usual small-sample factor ``k / (k - 1)`` for k
+    frames. It takes the frames' actual scatter, not the assumed noise, as the measure.
+    ``lin``: :func:`linearised` at ``ext`` when already computed."""
+    J, r0, groups = linearised(ext, frames, board, use_edges) if lin is None else lin
     A = J.T @ J
     B = np.zeros((6, 6))
     for g in np.unique(groups):
@@ -257,7 +298,52 @@ def clustered_covariance(ext: Extrinsic, frames, board, use_edges: bool = True) 
         Ai = np.linalg.inv(A)
     except np.linalg.LinAlgError:
         return np.full((6, 6), np.inf)
-    return Ai @ B @ Ai * (k / max(k - 6, 1))
+    return Ai @ B @ Ai * (k / max(k - 1, 1))
+
+
+def noise_covariance(ext: Extrinsic, frames, board, use_edges: bool = True, lin=None,
+                     replicates: int = 64, seed: int = 0) -> np.ndarray:
+    """The covariance of the solution under the lidar's own noise alone (m, rad), by simulation:
+    each frame's points moved along their rays by Gaussian noise of that frame's measured RMS
+    off its own plane, its edge points also along their ring by up to half an azimuth step either
+    way (where a ring leaves the board is known to a step), then one Gauss-Newton step from
+    ``ext``. ``replicates`` draws (``seed``: the same frames give the same answer)."""
+    J, r0, _ = linearised(ext, frames, board, use_edges) if lin is None else lin
+    try:
+        pinv = np.linalg.solve(J.T @ J, J.T)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.inf)
+    rng = np.random.default_rng(seed)
+    models = [_noise_model(f) for f in frames]
+    steps = np.empty((replicates, 6))
+    for k in range(replicates):
+        noisy = [_jittered(f, m, rng) for f, m in zip(frames, models)]
+        steps[k] = -pinv @ (_stack(np.zeros(6), ext, noisy, board, use_edges)[0] - r0)
+    return np.cov(steps, rowvar=False)
+
+
+def _noise_model(f: TargetFrame) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """What :func:`_jittered` needs of ``f``, once: the unit rays of its points and edge points,
+    the range noise along them that puts the points ``f.lidar_rms`` off their plane, the step."""
+    rays = f.points / np.maximum(np.linalg.norm(f.points, axis=1, keepdims=True), 1e-9)
+    edge_rays = f.edges / np.maximum(np.linalg.norm(f.edges, axis=1, keepdims=True), 1e-9)
+    cos = np.sqrt(np.mean((rays @ f.lidar_normal) ** 2))
+    step = f.edge_step_rad if np.isfinite(f.edge_step_rad) else 0.0
+    return rays, edge_rays, f.lidar_rms / max(cos, 0.2), step
+
+
+def _jittered(f: TargetFrame, model, rng: np.random.Generator) -> TargetFrame:
+    """``f`` with fresh lidar noise (``model``: :func:`_noise_model` of ``f``): range noise along
+    the rays, the edge points also moved along their ring by up to half a step either way."""
+    rays, edge_rays, sigma, step = model
+    points = f.points + rays * rng.normal(0.0, sigma, (len(rays), 1))
+    edges = f.edges
+    if len(edges):
+        a = rng.uniform(-step / 2, step / 2, len(edges))
+        c, s = np.cos(a), np.sin(a)
+        edges = np.column_stack([c * edges[:, 0] - s * edges[:, 1], s * edges[:, 0] + c * edges[:, 1], edges[:, 2]])
+        edges = edges + edge_rays * rng.normal(0.0, sigma, (len(edges), 1))
+    return replace(f, points=points, edges=edges)
 
 
 def leave_one_out(ext: Extrinsic, frames, board, use_edges: bool = True) -> list[tuple[float, float]]:
