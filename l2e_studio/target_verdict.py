@@ -20,7 +20,8 @@
 * at least ``MIN_USED`` frames used.
 
 Otherwise ``not-trusted`` (the seed is handed back unless the caller asks to keep the result).
-:func:`board_check` judges ANY extrinsic (e.g. a targetless result) against boards in view.
+:func:`with_boards` judges ANY calibration (e.g. a targetless result) against the boards in
+view: this method run from what its verdict hands back, the two compared by :func:`board_check`.
 """
 
 from __future__ import annotations

@@ -32,8 +32,8 @@ Public API (stable; the app and the synthetic boards build on it):
   ``result.target.frames``: one :class:`FrameRecord` per scene (detected, reprojection, lidar
   points, plane/edge residuals, used or left out with the reason, leave-one-out move);
   ``result.target.sigma_m`` / ``sigma_deg``: per-axis standard deviations (camera frame).
-* :func:`board_frames` ``(scenes, camera, board, extrinsic)``: the frames of any extrinsic (e.g.
-  a targetless result) for :func:`l2e_studio.target_verdict.board_check`.
+* the board as a check on any calibration (e.g. a targetless result): this method run from it,
+  compared in :func:`l2e_studio.target_verdict.with_boards`.
 
 Layering: beside :mod:`l2e_studio.calibrate` (uses geometry, camera, scenes, io and calibrate's
 types; never verdict, qa, app or cli).
@@ -41,7 +41,7 @@ types; never verdict, qa, app or cli).
 
 from .board import Board, find_target, load_target
 from .detect import Detection, board_pose, detect_board, detect_cached
-from .engine import (FrameRecord, TargetDetail, TargetSettings, board_frames, calibrate_target, detect_frames,
+from .engine import (FrameRecord, TargetDetail, TargetSettings, calibrate_target, detect_frames,
                      scan_rings)
 from .lidar import LidarBoard, crop_board, search_board
 from .solve import Observability, Solution, TargetFrame, closed_form, frame_residuals, observability, solve
@@ -51,5 +51,5 @@ __all__ = [
     "Detection", "board_pose", "detect_board", "detect_cached", "detect_frames",
     "LidarBoard", "crop_board", "search_board",
     "Observability", "Solution", "TargetFrame", "closed_form", "frame_residuals", "observability", "solve",
-    "FrameRecord", "TargetDetail", "TargetSettings", "board_frames", "calibrate_target", "scan_rings",
+    "FrameRecord", "TargetDetail", "TargetSettings", "calibrate_target", "scan_rings",
 ]

@@ -186,22 +186,6 @@ def detect_frames(scenes: Sequence[Scene], camera: CameraModel, board: Board, us
     return out
 
 
-def board_frames(scenes: Sequence[Scene], camera: CameraModel, board: Board, extrinsic: Extrinsic,
-                 detections: Sequence[Detection] | None = None, use_cache: bool = True,
-                 settings: TargetSettings = TargetSettings()) -> list[TargetFrame]:
-    """The boards seen by both sensors, the lidar's searched around where ``extrinsic`` (any
-    calibration, e.g. a targetless result) puts the camera's: for
-    :func:`l2e_studio.target_verdict.board_check`."""
-    dets = detect_frames(scenes, camera, board, use_cache) if detections is None else detections
-    out = []
-    for sc, det in zip(scenes, dets):
-        if det.found:
-            lb = search_board(sc.points, scan_rings(sc), det, board, extrinsic, settings.seed_deg, settings.seed_m)
-            if lb.found:
-                out.append(TargetFrame(sc.name, det.pose, lb.points, lb.edges, lb.azimuth_step_rad))
-    return out
-
-
 def calibrate_target(
     scenes: Sequence[Scene],
     camera: CameraModel,
