@@ -109,32 +109,35 @@ def find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, st
     """(N, 2) inner corners to sub-pixel and the detector that found them, or ``(None, reason)``."""
     grey = normalise_image(image)
     pattern = board.inner
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     for scale in (1, 2):
-        img = grey if scale == 1 else cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
-        ok, corners = cv2.findChessboardCorners(img, pattern, flags=flags)
-        if ok:
-            corners = corners.reshape(-1, 2).astype(np.float32)
-            win = _subpix_window(corners, pattern)
-            corners = cv2.cornerSubPix(img, corners.reshape(-1, 1, 2), (win, win), (-1, -1),
-                                       (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.01)).reshape(-1, 2)
-            return _to_original(corners, scale), f"findChessboardCorners{'' if scale == 1 else ' x2'} + cornerSubPix"
+        corners = _quads(grey, pattern, scale)
+        if corners is not None:
+            return corners, f"findChessboardCorners{'' if scale == 1 else ' x2'} + cornerSubPix"
     sb = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
     ok, corners = cv2.findChessboardCornersSB(grey, pattern, flags=sb)
     if ok:
         return corners.reshape(-1, 2).astype(np.float64), "findChessboardCornersSB"
     for x0, y0, crop in bright_regions(grey):
         for scale in REGION_SCALES:
-            img = cv2.resize(crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
-            ok, corners = cv2.findChessboardCorners(img, pattern, flags=flags)
-            if ok:
-                corners = corners.reshape(-1, 2).astype(np.float32)
-                win = _subpix_window(corners, pattern)
-                corners = cv2.cornerSubPix(img, corners.reshape(-1, 1, 2), (win, win), (-1, -1),
-                                           (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.01)).reshape(-1, 2)
-                return _to_original(corners, scale) + (x0, y0), f"findChessboardCorners, board region x{scale} + cornerSubPix"
+            corners = _quads(crop, pattern, scale)
+            if corners is not None:
+                return corners + (x0, y0), f"findChessboardCorners, board region x{scale} + cornerSubPix"
     return None, (f"no {pattern[0]}x{pattern[1]} inner-corner grid found (quad detector at 1x and 2x, "
                   "sector detector, bright regions upscaled)")
+
+
+def _quads(grey: np.ndarray, pattern: tuple[int, int], scale: int) -> np.ndarray | None:
+    """The quad detector on ``grey`` upscaled ``scale`` times (cubic), refined by cornerSubPix
+    there; corners in ``grey``'s pixels, or None."""
+    img = grey if scale == 1 else cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
+    ok, corners = cv2.findChessboardCorners(img, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    if not ok:
+        return None
+    corners = corners.reshape(-1, 2).astype(np.float32)
+    win = _subpix_window(corners, pattern)
+    corners = cv2.cornerSubPix(img, corners.reshape(-1, 1, 2), (win, win), (-1, -1),
+                               (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.01)).reshape(-1, 2)
+    return _to_original(corners, scale)
 
 
 #: upscaling tried on a bright region (a board a few pixels a square needs 3-4x for the quad detector)
