@@ -203,11 +203,20 @@ def test_cancel_says_cancelling_at_once_and_a_cancelled_result_looks_different(p
     open_tab(page, "Optimise")
     page.get_by_role("button", name="Start").click()
     wait_for(lambda: app.state.snapshot().run.evaluations >= 10, timeout=60, what="the run to get going")
-    t0 = time.monotonic()
+    # the page stamps the click and the moment the words appear (its own clock): Playwright's
+    # checks before a click, and this process's polling, take long on a busy machine and are no
+    # part of what a person sees
+    page.evaluate("""() => {
+        document.addEventListener('click', () => { window.__clicked = performance.now(); }, true);
+        new MutationObserver((_, obs) => {
+            if (window.__clicked !== undefined && document.body.innerText.includes('Cancelling...')) {
+                window.__shown = performance.now(); obs.disconnect(); }
+        }).observe(document.body, {subtree: true, childList: true, characterData: true});
+    }""")
     page.get_by_role("button", name="Cancel").click()
-    page.get_by_text("Cancelling...").first.wait_for(timeout=2_000)
-    shown_after = time.monotonic() - t0
-    assert shown_after < 1.0, f"'Cancelling...' appeared after {shown_after:.2f} s"
+    page.get_by_text("Cancelling...").first.wait_for(timeout=5_000)
+    shown_after = page.evaluate("() => (window.__shown - window.__clicked) / 1000")
+    assert shown_after < 1.0, f"'Cancelling...' appeared {shown_after:.2f} s after the click"
     assert app.state.snapshot().run.status == "running"  # still winding down: the text is honest
     page.get_by_text("Cancelled").first.wait_for(timeout=20_000)
     screenshot(page, "15_cancelled")
