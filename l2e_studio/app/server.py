@@ -55,6 +55,8 @@ OVERLAY_REST_S = 0.25
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
 POSE_3D_REST_S = 1.0
+#: s the readout waits for the overlay frame of its state (see ``_update_mi``)
+MI_AFTER_FRAME_S = 0.25
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
@@ -107,6 +109,8 @@ class App:
 
         self._want_rest = True  # the next overlay frame is the one at rest (at start, and once inputs stop)
         self._pose_3d_pending = False
+        self._frame_cond = threading.Condition()
+        self._frame_version = -1  # the state version of the last overlay frame handed to viser
         self.overlay_worker = LatestWorker("overlay", self._render_overlay)
         self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
         self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
@@ -327,6 +331,9 @@ class App:
         try:
             self.overlay.render(snap, rest=rest)
         finally:
+            with self._frame_cond:
+                self._frame_version = max(self._frame_version, snap.version)
+                self._frame_cond.notify_all()
             if not rest:
                 self.overlay_settle.poke()
             else:
@@ -353,10 +360,15 @@ class App:
                 self.view3d.show_pose(self.state.snapshot().extrinsic)
 
     def _update_mi(self) -> None:
-        # Runs beside the overlay's frame, not after it: at 40 full-size scenes on 2 cores both
-        # then land within ~100 ms (frame median 67 ms, readout 81 ms; one after the other, the
-        # readout took 102 ms and the frame 49 ms: bench_browser_overlay.py).
-        snap = self.state.snapshot()
+        # Starts once the overlay's frame of this state is handed to viser (or after
+        # MI_AFTER_FRAME_S): the frame is what a person waits for, and at 40 full-size scenes on
+        # 2 loaded cores the readout beside it made it 54-76 ms instead of 26-36 ms, while the
+        # readout itself finished at about the same time (144-188 ms either way).
+        version = self.state.snapshot().version
+        if not self.overlay_worker.wait_idle(0):  # a frame is coming
+            with self._frame_cond:
+                self._frame_cond.wait_for(lambda: self._frame_version >= version, MI_AFTER_FRAME_S)
+        snap = self.state.snapshot()  # the latest state: it may have moved on meanwhile
         key = (self.readout.generation, snap.included)  # read first: a newer map only makes it stale
         reading = self.readout.read(snap.extrinsic, snap.included)
         if key not in self._reference_mi:
