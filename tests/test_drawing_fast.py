@@ -1,6 +1,7 @@
 """The overlay's faster drawing (a cached scaled map, OpenCV's RGBA -> RGB) draws exactly what the
 drawing it replaced drew: the same bytes for dense and sparse scans, shrunk, zoomed, blended,
-outlined and depth-ordered."""
+outlined and depth-ordered; the JPEG search that starts from the last quality finds what
+the full search finds."""
 
 from __future__ import annotations
 
@@ -114,3 +115,23 @@ def test_scaled_map_is_kept_per_base_array_and_not_writable():
     style = OverlayStyle(point_size=2, outline=1)
     drawn = render_view(other, pts, ext, cam, style, colors, None, 451, 451)
     assert np.array_equal(drawn, old_render_view(other, pts, ext, cam, style, colors, None, 451, 451, False))
+
+
+def test_jpeg_search_from_the_last_quality_finds_the_same_answer_in_two_encodes(monkeypatch):
+    from l2e_studio.app.panels import overlay_view
+    from l2e_studio.app.panels.overlay_view import REST_QUALITIES, jpeg_within
+
+    cam, pts, colors, ext, base = scan(20_000)
+    frame = render_view(base, pts, ext, cam, OverlayStyle(point_size=2, outline=1), colors, None, 564, 564)
+    encodes = []
+    real = overlay_view.encode_jpeg
+    monkeypatch.setattr(overlay_view, "encode_jpeg", lambda img, q: encodes.append(q) or real(img, q))
+    for budget in (10**7, 150_000, 110_000, 90_000, 80_000, 20_000, 2_000):  # top, middle, bottom; shrunk
+        want = jpeg_within(frame, budget, REST_QUALITIES)
+        for start in (None, *REST_QUALITIES):
+            encodes.clear()
+            got = jpeg_within(frame, budget, REST_QUALITIES, start=start)
+            assert got[1] == want[1] and got[2] == want[2] and got[0].shape == want[0].shape
+            assert len(got[1]) <= budget or got[0].shape[1] <= 320
+            if start == want[2] and got[0].shape == frame.shape:
+                assert len(encodes) <= 2  # the answer and its better neighbour
