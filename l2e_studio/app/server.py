@@ -49,8 +49,11 @@ log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
 #: s without a change before the frame at rest replaces the preview (key auto-repeat and drags
-#: send a change every 16-50 ms; a person nudging pauses longer)
-OVERLAY_REST_S = 0.25
+#: send a change every 16-50 ms; a person nudging pauses longer). The frame at rest should be
+#: painted within 400 ms of the input: this leaves ~250 ms to draw, encode, send and paint it.
+OVERLAY_REST_S = 0.15
+#: s after the readout before the scene table (every scene's score) is redrawn
+TABLE_REST_S = 0.25
 #: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
@@ -116,7 +119,7 @@ class App:
         self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
         # the scene table (every scene's score) follows at rest: re-rendering a table of 40-100
         # rows on every step would hold up the readout and the next frame in the page
-        self.table_settle = Settle("scene-table-rest", self._table_at_rest, OVERLAY_REST_S)
+        self.table_settle = Settle("scene-table-rest", self._table_at_rest, TABLE_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
         self.compare_worker = LatestWorker("compare", self.compare.render)
         self.scene_3d_worker = LatestWorker("scene-3d", self._show_scene_3d)
