@@ -58,7 +58,7 @@ TABLE_REST_S = 0.25
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
 POSE_3D_REST_S = 1.0
-#: s the readout waits for the overlay frame of its state (see ``_update_mi``)
+#: s the readout and before/after wait for the overlay frame of their state (see ``_update_mi``)
 MI_AFTER_FRAME_S = 0.25
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
@@ -114,6 +114,7 @@ class App:
         self._pose_3d_pending = False
         self._frame_cond = threading.Condition()
         self._frame_version = -1  # the state version of the last overlay frame handed to viser
+        self._tables_stale = False  # the scene tables still show the previous selection
         self.overlay_worker = LatestWorker("overlay", self._render_overlay)
         self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
         self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
@@ -121,7 +122,7 @@ class App:
         # rows on every step would hold up the readout and the next frame in the page
         self.table_settle = Settle("scene-table-rest", self._table_at_rest, TABLE_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
-        self.compare_worker = LatestWorker("compare", self.compare.render)
+        self.compare_worker = LatestWorker("compare", self._render_compare)
         self.scene_3d_worker = LatestWorker("scene-3d", self._show_scene_3d)
         self.recording_worker = LatestWorker("recording", self._read_recording)
         self.refresh()
@@ -173,9 +174,12 @@ class App:
             self.state.select(index)
         self.overlay_worker.poke()  # first: the overlay is what the user is waiting for
         with self.ui_lock:
-            self.scenes.show_selection()
-            self.target.show_table()
+            self.scenes.show_selection(table=False)
             self.event_maps.show()
+        # the two tables of every scene follow at rest: re-rendering 40-100 rows of markdown takes
+        # the page's main thread just when the new overlay should be painted
+        self._tables_stale = True
+        self.table_settle.poke()
         self.recording_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
@@ -367,10 +371,7 @@ class App:
         # MI_AFTER_FRAME_S): the frame is what a person waits for, and at 40 full-size scenes on
         # 2 loaded cores the readout beside it made it 54-76 ms instead of 26-36 ms, while the
         # readout itself finished at about the same time (144-188 ms either way).
-        version = self.state.snapshot().version
-        if not self.overlay_worker.wait_idle(0):  # a frame is coming
-            with self._frame_cond:
-                self._frame_cond.wait_for(lambda: self._frame_version >= version, MI_AFTER_FRAME_S)
+        self._wait_for_frame(self.state.snapshot().version)
         snap = self.state.snapshot()  # the latest state: it may have moved on meanwhile
         key = (self.readout.generation, snap.included)  # read first: a newer map only makes it stale
         reading = self.readout.read(snap.extrinsic, snap.included)
@@ -382,8 +383,23 @@ class App:
         self.table_settle.poke()
 
     def _table_at_rest(self) -> None:
-        if self.reading is not None:
-            self.scenes.show_mi(self.reading)
+        with self.ui_lock:
+            if self.reading is not None or self._tables_stale:
+                self.scenes.show_mi(self.reading)
+            if self._tables_stale:
+                self._tables_stale = False
+                self.target.show_table()
+
+    def _wait_for_frame(self, version: int) -> None:
+        """Return once the overlay frame of state ``version`` is handed to viser (at most
+        ``MI_AFTER_FRAME_S``; at once when no frame is coming)."""
+        if not self.overlay_worker.wait_idle(0):
+            with self._frame_cond:
+                self._frame_cond.wait_for(lambda: self._frame_version >= version, MI_AFTER_FRAME_S)
+
+    def _render_compare(self) -> None:
+        self._wait_for_frame(self.state.snapshot().version)  # the live overlay first (it is on show)
+        self.compare.render()
 
     # --- the optimisation -----------------------------------------------------------------------
     def run_settings(self) -> CalibrationSettings:
