@@ -90,7 +90,8 @@ def scan(n_points: int, width: int = 640, height: int = 360, seed: int = 0):
 
 @pytest.mark.parametrize("n_points, point_size", [(20_000, 2), (5_000, 3)])  # dense (64-beam-like), sparse
 @pytest.mark.parametrize("width, window", [(564, None), (361, None), (320, None), (640, None),
-                                           (640, (100, 50, 160, 90))])  # shrunk by odd and even factors; 4x zoom
+                                           (640, (100, 50, 160, 90)), (160, (100, 50, 160, 90))])
+# shrunk by odd and even factors; a 4x zoom; a window at 1:1 (a view of the map, not a copy)
 @pytest.mark.parametrize("opacity, outline, color_by", [(1.0, 0, "intensity"), (0.8, 1, "depth")])
 def test_render_view_draws_the_same_bytes_as_before(n_points, point_size, width, window, opacity, outline, color_by):
     cam, pts, colors, ext, base = scan(n_points)
