@@ -59,7 +59,7 @@ TABLE_REST_S = 0.25
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
 POSE_3D_REST_S = 1.0
 #: s the readout and before/after wait for the overlay frame of their state (see ``_update_mi``)
-MI_AFTER_FRAME_S = 0.25
+FRAME_FIRST_S = 0.25
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
@@ -368,7 +368,7 @@ class App:
 
     def _update_mi(self) -> None:
         # Starts once the overlay's frame of this state is handed to viser (or after
-        # MI_AFTER_FRAME_S): the frame is what a person waits for, and at 40 full-size scenes on
+        # FRAME_FIRST_S): the frame is what a person waits for, and at 40 full-size scenes on
         # 2 loaded cores the readout beside it made it 54-76 ms instead of 26-36 ms, while the
         # readout itself finished at about the same time (144-188 ms either way).
         self._wait_for_frame(self.state.snapshot().version)
@@ -392,10 +392,10 @@ class App:
 
     def _wait_for_frame(self, version: int) -> None:
         """Return once the overlay frame of state ``version`` is handed to viser (at most
-        ``MI_AFTER_FRAME_S``; at once when no frame is coming)."""
+        ``FRAME_FIRST_S``; at once when no frame is coming)."""
         if not self.overlay_worker.wait_idle(0):
             with self._frame_cond:
-                self._frame_cond.wait_for(lambda: self._frame_version >= version, MI_AFTER_FRAME_S)
+                self._frame_cond.wait_for(lambda: self._frame_version >= version, FRAME_FIRST_S)
 
     def _render_compare(self) -> None:
         self._wait_for_frame(self.state.snapshot().version)  # the live overlay first (it is on show)
