@@ -342,7 +342,9 @@ class App:
                 self._frame_version = max(self._frame_version, snap.version)
                 self._frame_cond.notify_all()
             if not rest:
-                self.overlay_settle.poke()
+                # the quiet time counts from the last change, not from this preview's end: the
+                # frame at rest is not held up by the preview's own drawing
+                self.overlay_settle.poke(at=self.overlay_worker.last_poke)
             else:
                 # the 3D cloud of a newly selected scene (~600 KB) follows the frame at rest: drawing
                 # it costs a GPU-less page 100+ ms on its main thread, which would hold up the paint
