@@ -136,3 +136,16 @@ def test_jpeg_search_from_the_last_quality_finds_the_same_answer_in_two_encodes(
             assert len(got[1]) <= budget or got[0].shape[1] <= 320
             if start == want[2] and got[0].shape == frame.shape:
                 assert len(encodes) <= 2  # the answer and its better neighbour
+
+
+def test_camera_frame_by_opencv_matches_the_extrinsics_own_transform():
+    from l2e_studio.app.overlay import camera_frame
+
+    cam, pts, colors, ext, base = scan(5_000)
+    ext = ext.perturbed([0.3, -0.2, 0.1], [0.05, -0.02, 0.03])
+    for points in (pts, pts.astype(np.float64), pts[:1], pts[:0]):
+        got, want = camera_frame(points, ext), ext.transform(points)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        tol = 1e-5 if points.dtype == np.float32 else 1e-12
+        assert np.allclose(got, want, rtol=tol, atol=tol)
+    assert np.abs(camera_frame(pts, ext) - pts).max() > 0.1  # it did move them
