@@ -22,7 +22,7 @@ def scene_set(tmp_path_factory):
 
 
 @pytest.fixture
-def app(scene_set, tmp_path, monkeypatch):
+def app(scene_set, tmp_path):
     from l2e_studio.app.server import build_app
 
     a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out")
