@@ -5,7 +5,11 @@ slider values, project the points, draw them on the contrast-stretched map, JPEG
 Part 2 times the running app (a real viser server, no browser needed): from the slider
 callback's ``App.set_extrinsic`` to the new frame handed to viser (encoded, queued for every
 tab), with the MI readout worker competing for the CPU as it does in use.
-Target: <= 100 ms. Run: ``python benchmarks/bench_overlay.py``.
+Part 1 also times the app's own drawing at the frame widths it sends (``render_view``: the map
+scaled to the frame, outlined discs drawn into it) and the JPEG within the byte budget.
+Part 2 reports previews and frames at rest at the 1366 and 1920 px windows' frame widths.
+These are the server's legs only; the page's are in ``bench_browser_overlay.py``.
+Target: <= 100 ms. Run: ``python benchmarks/bench_overlay.py [--repeats 20] [--no-app]``.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from l2e_studio.app.overlay import (
     normalise_map,
     project_scene,
     render_overlay,
+    render_view,
 )
 from l2e_studio.app.pose import extrinsic_from_sliders
 from l2e_studio.camera import CameraModel
@@ -106,6 +111,8 @@ def main() -> None:
     for color_by, opacity, lo, med, p95, enc, kib in rows:
         print(f"{color_by:>10} {opacity:>8.2f} {lo:>7.1f} {med:>10.1f} {p95:>8.1f} {enc:>10.1f} {kib:>7.0f}")
 
+    frame_widths(args.width, args.height, args.repeats)
+
     ext_a = seed
     ext_b = seed.perturbed([0.02, 0, 0], [0, 0.01, 0])
     style = OverlayStyle(point_size=args.point_size)
@@ -124,12 +131,47 @@ def main() -> None:
         app_latency(camera, pts, intensity, event_map, seed, args.repeats, args.scenes)
 
 
+def frame_widths(width: int, height: int, repeats: int) -> None:
+    """The app's own drawing: ``render_view`` at the frame widths it sends (a preview 640 px; at
+    rest 722 px in a 1366 px window, 1128 px in a 1920 px one), dense and sparse scans, then the
+    JPEG within the 60 KB budget at the best quality (the frame at rest)."""
+    from l2e_studio.app.panels.overlay_view import FRAME_BYTES, REST_QUALITIES, jpeg_within, panel_layout
+
+    print("render_view at the frame's width (outlined discs, opacity 0.8), then JPEG within the budget "
+          "(median / p95 ms):")
+    for n_points, size, what in ((75_000, 2, "64-beam-like"), (20_000, 3, "16-beam-like")):
+        camera, pts, intensity = full_size_scene(n_points, width, height)
+        T = np.eye(4)
+        T[:3, :3] = LIDAR_TO_CAMERA_AXES
+        T[:3, 3] = (0.05, -0.1, 0.02)
+        seed = Extrinsic.from_matrix(T)
+        base = grey_rgb(normalise_map(event_map_for(pts, seed, camera)), 1.0)
+        colors = intensity_colors(intensity)
+        style = OverlayStyle(point_size=size, opacity=0.8, outline=1)
+        for frame in (640, panel_layout(1366)[1], panel_layout(1920)[1]):
+            draw, enc, quality = [], [], None
+            for i in range(repeats):
+                ext = seed.perturbed([0.001 * (i % 5), 0, 0], [0, 0.002 * (i % 3), 0])
+                t0 = time.perf_counter()
+                img = render_view(base, pts, ext, camera, style, colors, None, frame, frame)
+                t1 = time.perf_counter()
+                _, _, quality = jpeg_within(img, FRAME_BYTES, REST_QUALITIES, frame, quality)
+                enc.append(time.perf_counter() - t1)
+                draw.append(t1 - t0)
+            d, e = np.array(draw[3:]) * 1e3, np.array(enc[3:]) * 1e3
+            print(f"  {what} ({n_points} points), {frame} px: draw {np.median(d):.1f} / {np.percentile(d, 95):.1f}, "
+                  f"JPEG {np.median(e):.1f} / {np.percentile(e, 95):.1f} (quality {quality})")
+
+
 def app_latency(camera, pts, intensity, event_map, seed, repeats: int, n_scenes: int) -> None:
-    """Slider callback -> frame handed to viser, through a running App."""
+    """Slider callback -> frame handed to viser, and -> the score readout computed, through a
+    running App, for the frame widths of a 1366 and a 1920 px wide window: a preview (what a
+    change sends first) and a frame at rest (sent once the input rests)."""
     import socket
     from pathlib import Path
     from tempfile import mkdtemp
 
+    from l2e_studio.app.panels.overlay_view import panel_layout
     from l2e_studio.app.server import build_app
 
     scenes = [Scene(f"scene_{i:03d}", pts, intensity, event_map, "events") for i in range(n_scenes)]
@@ -139,26 +181,31 @@ def app_latency(camera, pts, intensity, event_map, seed, repeats: int, n_scenes:
         port = s.getsockname()[1]
     app = build_app(SceneSet(tmp, camera, seed, scenes), port=port, out_dir=tmp / "results")
     try:
-        app.overlay.point_size.value = 3
         app.overlay_worker.wait_idle(30)
         app.mi_worker.wait_idle(60)
-        times = []
-        for i in range(repeats):
-            frames = app.overlay.frames
-            sliders = np.concatenate([seed.translation + 0.001 * (i % 7), (0.05 * i, -0.03 * i, 0.02 * i)])
-            t0 = time.perf_counter()
-            app.set_extrinsic(extrinsic_from_sliders(sliders, seed), source="sliders")
-            while app.overlay.frames == frames:
-                time.sleep(0.0005)
-            times.append(time.perf_counter() - t0)
-            app.mi_worker.wait_idle(30)  # one slider step at a time, as a person moves it
-        t = np.array(times[3:]) * 1e3
-        print(
-            f"through the app ({n_scenes} scenes loaded, MI readout live): slider -> frame handed to viser "
-            f"min {t.min():.1f} ms, median {np.median(t):.1f} ms, p95 {np.percentile(t, 95):.1f} ms, "
-            f"max {t.max():.1f} ms; "
-            f"MI readout {app.mi_worker.last_seconds * 1e3:.0f} ms per update"
-        )
+        print(f"through the app ({n_scenes} scenes loaded, MI readout live): slider -> frame handed to viser; "
+              f"-> readout computed (median / p95 ms)")
+        for window in (1366, 1920):
+            app.overlay.display_width = panel_layout(window)[1]
+            for rest in (False, True):
+                frame, readout = [], []
+                for i in range(repeats):
+                    frames = app.overlay.frames
+                    sliders = np.concatenate([seed.translation + 0.001 * (i % 7), (0.05 * i, -0.03 * i, 0.02 * i)])
+                    app._want_rest = rest  # the next frame is the one at rest (as once the input rests)
+                    t0 = time.perf_counter()
+                    app.set_extrinsic(extrinsic_from_sliders(sliders, seed), source="sliders")
+                    while app.overlay.frames == frames:
+                        time.sleep(0.0005)
+                    frame.append(time.perf_counter() - t0)
+                    app.mi_worker.wait_idle(30)  # one slider step at a time, as a person moves it
+                    readout.append(time.perf_counter() - t0)
+                    time.sleep(0.3)  # the frame at rest and the table follow; then the next step
+                    app.overlay_worker.wait_idle(10)
+                f, r = np.array(frame[2:]) * 1e3, np.array(readout[2:]) * 1e3
+                print(f"  {window} px window, frame {app.overlay.display_width if rest else min(app.overlay.display_width, 640)} px "
+                      f"{'at rest' if rest else 'preview'}: frame {np.median(f):.0f} / {np.percentile(f, 95):.0f}; "
+                      f"readout {np.median(r):.0f} / {np.percentile(r, 95):.0f}")
     finally:
         app.stop()
 

@@ -118,7 +118,8 @@ def draw_points(
     palette = np.zeros((u.size + 1, 4), np.uint8)  # RGBA rows viewed as one uint32 each
     palette[1:, :3] = colors
     layer = palette.view(np.uint32).ravel()[rank.astype(np.int32)]
-    layer = np.ascontiguousarray(layer.view(np.uint8).reshape(h, w, 4)[:, :, :3])
+    # RGBA -> RGB by OpenCV: a numpy copy of the strided [:, :, :3] view costs ~7 ms at 1128x634
+    layer = cv2.cvtColor(layer.view(np.uint8).reshape(h, w, 4), cv2.COLOR_RGBA2RGB)
     if opacity < 1.0:
         layer = cv2.addWeighted(base, 1.0 - float(opacity), layer, float(opacity), 0.0)
     mask = (rank > 0).view(np.uint8)

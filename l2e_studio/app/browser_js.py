@@ -12,6 +12,16 @@
 - The window's size (``"<width>x<height>"``) goes into the hidden "Window size" field once the
   page is up and after each resize, so that the server can give the overlay the space.
 
+- In a browser that draws WebGL in software (no GPU: SwiftShader, llvmpipe), the 3D view is
+  paused while the extrinsic or the display is tuned: every 3D frame there costs the page's
+  main thread 50-150 ms (drawing and reading the canvas back), which would hold up the overlay
+  frame of the next key press. A key or pointer press on a slider, a nudge / Undo / Redo button,
+  a text field or a scene table row starts a pause; the view keeps its last picture (the canvas
+  is drawn with ``preserveDrawingBuffer``: WebGL draw and clear calls are skipped, so the
+  canvas is never redrawn nor read back) and catches up ``TUNE_PAUSE_MS`` after the last such
+  press, or at once when the pointer enters the 3D view. With a GPU nothing is paused.
+  ``window.__l2e3d`` holds the state (``soft``, ``drawn``, ``skipped``, ``paused()``).
+
 viser renders ``add_html`` content with ``innerHTML``, where a ``<script>`` never runs; an
 ``<img onerror>`` handler does, so the script hangs off a tiny broken image. It installs its
 listeners once per page, whatever number of times the element is rendered.
@@ -20,6 +30,10 @@ listeners once per page, whatever number of times the element is rendered.
 from __future__ import annotations
 
 import html
+
+#: ms after the last tuning press that a software-drawn 3D view catches up (a person nudging
+#: pauses 0.5-2 s between presses; the 3D view follows once they stop, or on hover)
+TUNE_PAUSE_MS = 3000
 
 _SCRIPT = r"""
 if (!window.__l2eKeys) {
@@ -81,6 +95,41 @@ if (!window.__l2eKeys) {
   let sizeTimer = null;
   window.addEventListener('resize', () => { clearTimeout(sizeTimer); sizeTimer = setTimeout(() => reportSize(0), 300); });
   reportSize(40);
+  const S = window.__l2e3d = {soft: false, drawn: 0, skipped: 0, until: 0,
+                              paused: () => S.soft && performance.now() < S.until};
+  try {
+    const gl = document.createElement('canvas').getContext('webgl');
+    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)).toLowerCase() : '';
+    S.soft = /swiftshader|llvmpipe|softpipe|software/.test(name);
+    const lose = gl && gl.getExtension('WEBGL_lose_context');
+    if (lose) lose.loseContext();
+  } catch (e) {}
+  if (S.soft) {
+    const calls = ['clear', 'drawArrays', 'drawElements', 'drawArraysInstanced', 'drawElementsInstanced',
+                   'drawRangeElements', 'blitFramebuffer'];
+    for (const ctx of [window.WebGLRenderingContext, window.WebGL2RenderingContext]) {
+      if (!ctx) continue;
+      for (const name of calls) {
+        const f = ctx.prototype[name];
+        if (typeof f !== 'function') continue;
+        ctx.prototype[name] = function (...args) {
+          if (S.paused()) { S.skipped++; return; }
+          S.drawn++;
+          return f.apply(this, args);
+        };
+      }
+    }
+  }
+  const tuning = (el) => el instanceof Element && !!(el.closest('[role=slider], .mantine-Slider-root') ||
+      el.tagName === 'INPUT' || el.tagName === 'TEXTAREA' ||
+      /^([\u2212+]|Undo$|Redo$)/.test((el.closest('button') || {textContent: ''}).textContent.trim()) ||
+      (el.closest('tbody tr') && (el.closest('table').querySelector('th') || {}).textContent === 'use'));
+  const onInput = (e) => { if (e.target instanceof Element && e.target.tagName !== 'CANVAS') {
+    S.until = tuning(e.target) ? performance.now() + TUNE_PAUSE_MS : 0; } };
+  document.addEventListener('keydown', onInput, true);
+  document.addEventListener('pointerdown', onInput, true);
+  document.addEventListener('pointerover', (e) => { if (e.target instanceof HTMLCanvasElement) S.until = 0; }, true);
   document.addEventListener('pointerdown', (e) => onPointer(e, false), true);
   document.addEventListener('pointermove', (e) => { if (e.buttons & 1) onPointer(e, true); }, true);
   document.addEventListener('dragstart', (e) => { if (e.target instanceof HTMLImageElement) e.preventDefault(); }, true);
@@ -90,7 +139,7 @@ if (!window.__l2eKeys) {
 #: HTML that installs the key handling when rendered (invisible).
 KEY_HANDLING_HTML = (
     '<img src="data:," alt="" style="display:none" onerror="'
-    + html.escape(" ".join(_SCRIPT.split()), quote=True)
+    + html.escape(" ".join(_SCRIPT.replace("TUNE_PAUSE_MS", str(TUNE_PAUSE_MS)).split()), quote=True)
     + '">'
 )
 

@@ -49,12 +49,17 @@ log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
 #: s without a change before the frame at rest replaces the preview (key auto-repeat and drags
-#: send a change every 16-50 ms; a person nudging pauses longer)
-OVERLAY_REST_S = 0.25
+#: send a change every 16-50 ms; a person nudging pauses longer). The frame at rest should be
+#: painted within 400 ms of the input: this leaves ~250 ms to draw, encode, send and paint it.
+OVERLAY_REST_S = 0.15
+#: s after the readout before the scene table (every scene's score) is redrawn
+TABLE_REST_S = 0.25
 #: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
 #: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
 #: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
 POSE_3D_REST_S = 1.0
+#: s the readout and before/after wait for the overlay frame of their state (see ``_update_mi``)
+FRAME_FIRST_S = 0.25
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
@@ -107,14 +112,17 @@ class App:
 
         self._want_rest = True  # the next overlay frame is the one at rest (at start, and once inputs stop)
         self._pose_3d_pending = False
+        self._frame_cond = threading.Condition()
+        self._frame_version = -1  # the state version of the last overlay frame handed to viser
+        self._tables_stale = False  # the scene tables still show the previous selection
         self.overlay_worker = LatestWorker("overlay", self._render_overlay)
         self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
         self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
         # the scene table (every scene's score) follows at rest: re-rendering a table of 40-100
         # rows on every step would hold up the readout and the next frame in the page
-        self.table_settle = Settle("scene-table-rest", self._table_at_rest, OVERLAY_REST_S)
+        self.table_settle = Settle("scene-table-rest", self._table_at_rest, TABLE_REST_S)
         self.mi_worker = LatestWorker("mi", self._update_mi)
-        self.compare_worker = LatestWorker("compare", self.compare.render)
+        self.compare_worker = LatestWorker("compare", self._render_compare)
         self.scene_3d_worker = LatestWorker("scene-3d", self._show_scene_3d)
         self.recording_worker = LatestWorker("recording", self._read_recording)
         self.refresh()
@@ -166,9 +174,12 @@ class App:
             self.state.select(index)
         self.overlay_worker.poke()  # first: the overlay is what the user is waiting for
         with self.ui_lock:
-            self.scenes.show_selection()
-            self.target.show_table()
+            self.scenes.show_selection(table=False)
             self.event_maps.show()
+        # the two tables of every scene follow at rest: re-rendering 40-100 rows of markdown takes
+        # the page's main thread just when the new overlay should be painted
+        self._tables_stale = True
+        self.table_settle.poke()
         self.recording_worker.poke()
         self.mi_worker.poke()
         self.compare_worker.poke()
@@ -327,8 +338,13 @@ class App:
         try:
             self.overlay.render(snap, rest=rest)
         finally:
+            with self._frame_cond:
+                self._frame_version = max(self._frame_version, snap.version)
+                self._frame_cond.notify_all()
             if not rest:
-                self.overlay_settle.poke()
+                # the quiet time counts from the last change, not from this preview's end: the
+                # frame at rest is not held up by the preview's own drawing
+                self.overlay_settle.poke(at=self.overlay_worker.last_poke)
             else:
                 # the 3D cloud of a newly selected scene (~600 KB) follows the frame at rest: drawing
                 # it costs a GPU-less page 100+ ms on its main thread, which would hold up the paint
@@ -353,10 +369,12 @@ class App:
                 self.view3d.show_pose(self.state.snapshot().extrinsic)
 
     def _update_mi(self) -> None:
-        # Runs beside the overlay's frame, not after it: at 40 full-size scenes on 2 cores both
-        # then land within ~100 ms (frame median 67 ms, readout 81 ms; one after the other, the
-        # readout took 102 ms and the frame 49 ms: bench_browser_overlay.py).
-        snap = self.state.snapshot()
+        # Starts once the overlay's frame of this state is handed to viser (or after
+        # FRAME_FIRST_S): the frame is what a person waits for, and at 40 full-size scenes on
+        # 2 loaded cores the readout beside it made it 54-76 ms instead of 26-36 ms, while the
+        # readout itself finished at about the same time (144-188 ms either way).
+        self._wait_for_frame(self.state.snapshot().version)
+        snap = self.state.snapshot()  # the latest state: it may have moved on meanwhile
         key = (self.readout.generation, snap.included)  # read first: a newer map only makes it stale
         reading = self.readout.read(snap.extrinsic, snap.included)
         if key not in self._reference_mi:
@@ -367,8 +385,23 @@ class App:
         self.table_settle.poke()
 
     def _table_at_rest(self) -> None:
-        if self.reading is not None:
-            self.scenes.show_mi(self.reading)
+        with self.ui_lock:
+            if self.reading is not None or self._tables_stale:
+                self.scenes.show_mi(self.reading)
+            if self._tables_stale:
+                self._tables_stale = False
+                self.target.show_table()
+
+    def _wait_for_frame(self, version: int) -> None:
+        """Return once the overlay frame of state ``version`` is handed to viser (at most
+        ``FRAME_FIRST_S``; at once when no frame is coming)."""
+        if not self.overlay_worker.wait_idle(0):
+            with self._frame_cond:
+                self._frame_cond.wait_for(lambda: self._frame_version >= version, FRAME_FIRST_S)
+
+    def _render_compare(self) -> None:
+        self._wait_for_frame(self.state.snapshot().version)  # the live overlay first (it is on show)
+        self.compare.render()
 
     # --- the optimisation -----------------------------------------------------------------------
     def run_settings(self) -> CalibrationSettings:

@@ -30,12 +30,14 @@ class LatestWorker:
         self._stop = False
         self.runs = 0
         self.last_seconds = 0.0
+        self.last_poke = 0.0  # time.monotonic() of the last poke
         self._thread = threading.Thread(target=self._loop, name=f"l2e-{name}", daemon=True)
         self._thread.start()
 
     def poke(self) -> None:
         """Ask for one more run (after the current one, if busy)."""
         with self._lock:
+            self.last_poke = time.monotonic()
             self._pending = True
             self._idle.clear()
             self._wake.set()
@@ -116,9 +118,12 @@ class Settle:
         self._thread = threading.Thread(target=self._loop, name=f"l2e-{name}", daemon=True)
         self._thread.start()
 
-    def poke(self) -> None:
+    def poke(self, at: float | None = None) -> None:
+        """Start (or restart) the quiet time, counted from ``at`` (a ``time.monotonic()``;
+        None: now; never earlier than a previous poke's)."""
         with self._cond:
-            self._last = time.monotonic()
+            now = time.monotonic()
+            self._last = now if at is None else max(self._last, min(now, at))
             self._armed = True
             self._cond.notify()
 

@@ -104,11 +104,13 @@ class ScenesPanel:
         elif action == "select":
             self.app.select_scene(index)
 
-    def show_selection(self) -> None:
+    def show_selection(self, table: bool = True) -> None:
+        """The selected scene in the dropdown and its include box (and in the table, ``table``)."""
         snap = self.app.state.snapshot()
         self.dropdown.value = self.app.state.scene_names[snap.selected]
         self.include.value = snap.included[snap.selected]
-        self.table.content = self._table(self.app.reading)
+        if table:
+            self.table.content = self._table(self.app.reading)
 
     def show_mi(self, reading: MiReading) -> None:
         self.table.content = self._table(reading)
