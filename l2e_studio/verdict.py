@@ -43,8 +43,10 @@ from typing import Callable
 import numpy as np
 
 from .calibrate import CalibrationResult, CalibrationSettings, Progress, refine
+from .verdict_check import Check
 from .geometry import Extrinsic
 from .objective import SceneStack
+from .peaks import far_climbs, noise_ceiling, rival_check, significance_check
 from .scoring.edges import canny_distance, lidar_edge_weights
 
 STATUSES = ("trusted", "trusted-rotation", "not-trusted")
@@ -62,32 +64,13 @@ OBSERVABLE_DROP = {"edges": 0.1, "mi": 0.02}
 EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distance (at 1280 px wide)
 SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
 MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
-#: another start's end further from the result than two answers may differ and still agree ...
-RIVAL_DEG = AGREE_MAX_DEG
-#: ... with this share of its score (or more) is a second answer: the data cannot tell. On the
-#: dev rigs the ends of well-determined results lie within 0.1 deg of it or score <= 65 % of it;
-#: on OpenCalib's two-scene rig, whose score peaks 1.3-1.7 deg off the reference, ends 0.5-2.2 deg
-#: apart scored 83-96 % of each other, and 2 of 5 runs from 1 deg seeds were trusted there with
-#: the old 2 deg / 90 %.
-RIVAL_SHARE = 0.8
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
-FAR_DEG = (2.0, 8.0)  # the far field of a peak: random rotations this far from it (deg) ...
-FAR_SAMPLES = 48  # ... this many of them (a fixed pattern, so a verdict is repeatable) ...
-FAR_POINTS = 100_000  # ... scored on at most this many points
-CELL_DEG = 0.1  # the landscape's resolution: the searched box holds (width / CELL_DEG)^3 independent cells
 #: Per camera axis: what moves its translation, and what to record when the scenes do not pin it.
 AXIS_ADVICE = {
     "x": "add scenes with near objects (a few metres) whose vertical edges stand in front of a far background",
     "y": "add scenes with near objects whose top or bottom edges are in view (a table, a car's roof at a few metres)",
     "z": "add scenes with near objects at the image's left and right edges",
 }
-
-
-@dataclass(frozen=True)
-class Check:
-    name: str
-    passed: bool
-    detail: str
 
 
 @dataclass(frozen=True)
@@ -214,42 +197,6 @@ def translation_axes(drops: np.ndarray, objective: str) -> tuple[AxisPinned, ...
     return tuple(AxisPinned(axis, bool(d >= need), float(d)) for axis, d in zip("xyz", drops))
 
 
-def noise_ceiling(settings: CalibrationSettings) -> float:
-    """How many standard deviations above its mean the best of a landscape of pure noise reaches
-    over the searched rotation box: ``sqrt(2 ln N)`` for ``N`` independent cells of
-    ``CELL_DEG`` (the expected maximum of N Gaussian draws; 5.6 for the default +-10 deg)."""
-    cells = (2.0 * settings.rotation_bound_deg / CELL_DEG) ** 3
-    return float(np.sqrt(2.0 * np.log(max(cells, 2.0))))
-
-
-def far_field(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
-    """(FAR_SAMPLES,) angles (deg) and scores at random rotations of ``at`` FAR_DEG away (a fixed pattern)."""
-    rng = np.random.default_rng(20230529)
-    axes = rng.normal(size=(FAR_SAMPLES, 3))
-    axes /= np.linalg.norm(axes, axis=1)[:, None]
-    angles = rng.uniform(*FAR_DEG, FAR_SAMPLES)
-    scores = [stack.score(at.perturbed(np.zeros(3), np.radians(a) * u), per_scene=False)[0] for a, u in zip(angles, axes)]
-    return angles, np.array(scores)
-
-
-def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
-    """Is the result's score a peak above the landscape's own fluctuations, or the best of its noise?
-
-    The fluctuations are what is left of the far field once its steady trend with the distance
-    from the result is taken out: the paper's MI on event maps falls smoothly over degrees (a
-    wide basin, not noise), an edge score at noise level does not fall at all."""
-    thin = stack.thinned(FAR_POINTS)
-    angles, far = far_field(thin, res)
-    at = thin.score(res, per_scene=False)[0]
-    trend = np.polyval(np.polyfit(angles, far, 1), angles)
-    spread = float(np.sqrt(np.sum((far - trend) ** 2) / (len(far) - 2)))
-    z = (at - float(np.mean(far))) / spread if spread > 0 else (np.inf if at > np.mean(far) else 0.0)
-    need = noise_ceiling(settings)
-    return Check("a significant peak" + tag, bool(z >= need),
-                 f"the score stands {z:.1f} standard deviations above its values {FAR_DEG[0]:g}-{FAR_DEG[1]:g} deg "
-                 f"away (the best of noise over the searched box reaches {need:.1f})")
-
-
 def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
     """Two disjoint point masks: alternate scenes, or (one scene) left and right of the image centre at ``at``."""
     if stack.n_scenes >= 2:
@@ -337,7 +284,9 @@ def judge(
     if on_untrusted not in ON_UNTRUSTED:
         raise ValueError(f"on_untrusted must be one of {', '.join(ON_UNTRUSTED)}")
     t0 = time.perf_counter()
-    steps = _Steps(1 + evidence_steps(settings) + (not settings.rotation_only), cancel, on_progress)  # + translation probes
+    # + translation probes, + climbs from the far field after a global search
+    steps = _Steps(1 + evidence_steps(settings) + (not settings.rotation_only) + (len(result.ends) >= 2),
+                   cancel, on_progress)
     seed, res = result.seed, result.extrinsic
     steps.next("preparing the final smoothing and the second score")
     final = stack.with_sigma(settings.sigma)
@@ -352,7 +301,11 @@ def judge(
         checks.append(Check("translation observable (translation)", all(a.pinned for a in axes),
                             f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
                             + ", ".join(f"{100 * a.drop:.0f} %" for a in axes) + f" (at least {100 * need:.0f} % each)"))
-    rival = rival_check(result)
+    climbs: tuple = ()
+    if len(result.ends) >= 2:  # a global search ran: climb from around the result too
+        steps.next("climbs from the far field around the result")
+        climbs = far_climbs(stack, result, settings, cancel, steps.within)
+    rival = rival_check(result, climbs)
     if rival is not None:
         checks.append(rival)
     failed = [c for c in checks if not c.passed]
@@ -412,22 +365,6 @@ def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: st
 def evidence_steps(settings: CalibrationSettings) -> int:
     """How many steps :func:`evidence` reports (scores, the peak's significance, two halves, second start)."""
     return 5
-
-
-def rival_check(result: CalibrationResult) -> Check | None:
-    """With a global search: no other start may end far away (``RIVAL_DEG``) with nearly the
-    result's score (``RIVAL_SHARE``). Two distinct peaks scored alike mean the scenes cannot
-    tell them apart, whichever the final score happens to pick (None without a global search)."""
-    res, score = result.extrinsic, result.score_result
-    others = [(e.error_to(res)[0], s) for e, s in result.ends]
-    if len(others) < 2 or not np.isfinite(score) or score <= 0:
-        return None
-    far = [(deg, s / score) for deg, s in others if deg >= RIVAL_DEG]
-    worst = max(far, key=lambda ds: ds[1], default=None)
-    passed = worst is None or worst[1] < RIVAL_SHARE
-    detail = ("no other start ended near its score" if worst is None else
-              f"the best of the other starts' ends {worst[0]:.1f} deg away scores {100 * worst[1]:.0f} % of it")
-    return Check("a single peak", passed, detail + f" (limit {100 * RIVAL_SHARE:.0f} % beyond {RIVAL_DEG:g} deg)")
 
 
 def evidence(

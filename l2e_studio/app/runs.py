@@ -114,9 +114,9 @@ class Runner:
         self._method: Method | None = None
         self._run_id, self._mask = 0, np.zeros(0, dtype=bool)
         self._scored_best: Extrinsic | None = None  # the last best point put on the common-scale curve
-        # a curve point the run's thread asks for (a stage's start, the result), scored by the
-        # ticker: the run's thread never waits on the readout, so Cancel stops it at once
-        self._pending: tuple[Extrinsic, int] | None = None
+        # the curve points the run's thread asks for (each stage's start, the result), in order,
+        # scored by the ticker: the run's thread never waits on the readout, so Cancel stops it at once
+        self._pending: list[tuple[Extrinsic, int]] = []
         self._pending_lock = threading.Lock()
 
     def start(self, method: Method) -> int:
@@ -132,7 +132,7 @@ class Runner:
         cancel = threading.Event()
         self._cancel, self._method = cancel, method
         self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
-        self._pending = None
+        self._pending = []
         self._score_best()  # the curve starts at the seed, on the readout's scale
 
         stage = [-1]
@@ -222,15 +222,15 @@ class Runner:
 
     def _ask_curve_point(self, best: Extrinsic, evaluations: int) -> None:
         with self._pending_lock:
-            self._pending = (best, evaluations)
+            self._pending.append((best, evaluations))
 
     def _score_pending(self) -> bool:
-        """Score the curve point the run's thread asked for, if any; True if there was one."""
+        """Score the curve points the run's thread asked for, in order; True if there were any."""
         with self._pending_lock:
-            pending, self._pending = self._pending, None
-        if pending is not None:
-            self._score_best(*pending)
-        return pending is not None
+            pending, self._pending = self._pending, []
+        for best, evaluations in pending:
+            self._score_best(best, evaluations)
+        return bool(pending)
 
     def _push_progress(self) -> None:
         if not self._score_pending() and self.app.state.snapshot().run.judging is None:
@@ -244,7 +244,7 @@ class Runner:
         app = self.app
         if self._ticker is not None:
             self._ticker.stop(2.0)
-        self._score_pending()  # the result's point, when the ticker did not get to it
+        self._score_pending()  # the points the ticker did not get to (the result's at least)
         snap = app.state.snapshot()
         app.optimise.show_progress(snap.run)
         app.optimise.show_running(False)
