@@ -52,7 +52,7 @@ def user():
 
 
 def settle(app) -> None:
-    assert app.rebuilder.wait(30)
+    assert app.maps.rebuilder.wait(30)
     for w in (app.overlay_worker, app.mi_worker, app.compare_worker, app.scene_3d_worker):
         assert w.wait_idle(20)
 

@@ -22,7 +22,7 @@ import viser
 from ..calibrate import CalibrationResult, CalibrationSettings
 from ..geometry import Extrinsic
 from ..io.events import Accumulation, EventStats
-from ..scenes import Scene, SceneSet
+from ..scenes import SceneSet
 from .display import SceneDisplay
 from .files import check_results_dir, default_results_dir, save_result
 from .handback import ResultScores, result_scores
@@ -40,7 +40,7 @@ from .panels.scenes import ScenesPanel
 from .panels.target import TargetPanel
 from .panels.view3d import View3D
 from .readout import MiReading, MiReadout
-from .rebuild import MapRebuilder, RebuildSummary, RecordingInfo
+from .maps import EventMapSession
 from .state import SessionState
 from .runs import CHECKERBOARD, METHOD_NAMES, Runner, checkerboard, targetless
 from .workers import LatestWorker, Settle
@@ -76,9 +76,7 @@ class App:
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
         self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma, objective)
         self.reading: MiReading | None = None
-        self.recordings = RecordingInfo()  # lengths of the raw event recordings, read on first need
-        self.rebuilder = MapRebuilder(self.camera.width, self.camera.height, self._rebuild_status,
-                                      self._map_rebuilt, self._rebuild_finished)
+        self.maps = EventMapSession(self)  # rebuilding maps from raw events, the recordings' lengths
         self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self.result_scores: ResultScores | None = None  # the last result's answers, on the readout's scale
@@ -124,7 +122,7 @@ class App:
         self.mi_worker = LatestWorker("mi", self._update_mi)
         self.compare_worker = LatestWorker("compare", self._render_compare)
         self.scene_3d_worker = LatestWorker("scene-3d", self._show_scene_3d)
-        self.recording_worker = LatestWorker("recording", self._read_recording)
+        self.recording_worker = LatestWorker("recording", self.maps.read_recording)
         self.refresh()
 
     # --- the URL ----------------------------------------------------------------------------
@@ -267,68 +265,15 @@ class App:
         self.compare_worker.poke()
         self.target.detect_boards()
 
-    # --- event maps ---------------------------------------------------------------------------
+    # --- event maps (rebuilt from raw recordings: :class:`EventMapSession`) ------------------
     def recording(self, index: int) -> EventStats | str | None:
-        """Scene ``index``'s raw recording: its stats, why they cannot be read, or None (not yet
-        read, or the map is not from raw events)."""
-        scene = self.scene_set.scenes[index]
-        return None if scene.accumulation is None or scene.map_path is None else self.recordings.get(scene.map_path)
+        return self.maps.recording(index)
 
     def rebuilding(self) -> bool:
-        """True while event maps are being rebuilt."""
-        return self.rebuilder.busy()
+        return self.maps.rebuilding()
 
     def rebuild_maps(self, settings: Accumulation, all_event_scenes: bool = False) -> None:
-        """Accumulate the selected scene's map again (or every scene's from raw events) with
-        ``settings``, in the background. Raises RuntimeError (nothing starts) during a run: the
-        run keeps the maps it started with, so a rebuild waits for its end."""
-        with self.ui_lock:
-            if self.state.snapshot().run.active:
-                raise RuntimeError("an optimisation is running (it keeps the maps it started with); rebuild when it ends")
-            scenes = self.scene_set.scenes
-            selected = self.state.snapshot().selected
-            targets = [i for i, sc in enumerate(scenes) if sc.accumulation is not None] if all_event_scenes else [selected]
-            if not targets or scenes[selected].accumulation is None and not all_event_scenes:
-                raise RuntimeError(f"the map of {scenes[selected].name} is not from raw events; there is nothing to rebuild")
-            self.rebuilder.start([(i, scenes[i]) for i in targets], settings)
-            self.event_maps.check()
-            self.optimise.show_start()
-
-    def _rebuild_status(self, text: str) -> None:
-        self.event_maps.show_status(text)
-
-    def _map_rebuilt(self, index: int, scene: Scene) -> None:
-        """A new map for scene ``index``: the readout, the display caches and every view follow."""
-        with self.ui_lock:
-            self.readout.set_map(index, scene.event_map)  # first: it refuses a map that does not fit
-            self.scene_set.scenes[index] = scene
-            self.displays[index] = SceneDisplay(scene)  # the old display caches go with the old map
-            self.view3d.show_map(index)
-            if index == self.state.snapshot().selected:
-                self.event_maps.show()
-        self.overlay_worker.poke()
-        self.mi_worker.poke()
-        self.compare_worker.poke()
-
-    def _rebuild_finished(self, summary: RebuildSummary) -> None:
-        with self.ui_lock:
-            self.event_maps.show_status(summary.line())
-            self.event_maps.show()
-            self.optimise.show_start()
-        if summary.errors:
-            self.notify_all("Map rebuild failed" if not summary.rebuilt else "Some maps were not rebuilt",
-                            "; ".join(summary.errors[:3]), color="red")
-
-    def _read_recording(self) -> None:
-        """Read the selected scene's recording length (once per file) for the Event map fields."""
-        index = self.state.snapshot().selected
-        scene = self.scene_set.scenes[index]
-        if scene.accumulation is None or scene.map_path is None or self.recordings.get(scene.map_path) is not None:
-            return
-        self.recordings.compute(scene.map_path)
-        with self.ui_lock:
-            if self.state.snapshot().selected == index:
-                self.event_maps.show()
+        self.maps.rebuild(settings, all_event_scenes)
 
     # --- workers ----------------------------------------------------------------------------
     def _render_overlay(self) -> None:
@@ -515,7 +460,7 @@ class App:
         self.overlay_settle.stop()
         self.pose_settle.stop()
         self.table_settle.stop()
-        self.rebuilder.wait(5.0)
+        self.maps.rebuilder.wait(5.0)
         self.target.stop()
         for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.scene_3d_worker,
                        self.recording_worker):
