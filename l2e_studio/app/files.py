@@ -20,6 +20,7 @@ from ..errors import InputError
 from ..atomic import atomic_write_bytes
 from ..export import dumps, extrinsic_to_dict, result_to_dict, write_result
 from ..geometry import Extrinsic
+from ..verdict import Verdict
 from ..io.cameras import load_seed
 from .heldout import HeldOutScore, held_out_section
 from ..io.safe_load import MAX_DOCUMENT_BYTES
