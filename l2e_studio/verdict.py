@@ -19,7 +19,7 @@ from the truth. So the result is judged by what the optimiser never saw or never
   agree when every scene shares one bias (a static rig records one background many times), but a
   landscape at noise level puts its highest point wherever the noise does: the result's height
   above that far field, in standard deviations, must exceed what the best of noise reaches over
-  the searched box (:func:`noise_ceiling`).
+  the searched box (:func:`l2e_studio.peaks.noise_ceiling`).
 
 Per translation axis the verdict says whether the scenes pin it, and what to record when not
 (:func:`translation_axes`).
@@ -46,7 +46,7 @@ from .calibrate import CalibrationResult, CalibrationSettings, Progress, refine
 from .verdict_check import Check
 from .geometry import Extrinsic
 from .objective import SceneStack
-from .peaks import far_climbs, noise_ceiling, rival_check, significance_check
+from .peaks import far_climbs, rival_check, significance_check
 from .scoring.edges import canny_distance, lidar_edge_weights
 
 STATUSES = ("trusted", "trusted-rotation", "not-trusted")
