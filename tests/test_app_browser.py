@@ -243,11 +243,14 @@ def test_cancel_stops_a_run_within_a_second(page, app):
     page.get_by_role("button", name="Start").click()
     wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
     assert app.state.snapshot().run.status == "running"
-    t0 = time.monotonic()
+    # the page stamps the click (epoch ms): Playwright's own checks before clicking take long on
+    # a busy machine and are no part of the app
+    page.evaluate("""() => document.addEventListener('click', () => {
+        window.__clicked = performance.timeOrigin + performance.now(); }, true)""")
     page.get_by_role("button", name="Cancel").click()
     wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
-    seconds = time.monotonic() - t0
-    assert seconds < 1.0, f"cancel took {seconds:.2f} s"
+    seconds = time.time() - page.evaluate("() => window.__clicked") / 1000.0
+    assert seconds < 1.0, f"cancel took {seconds:.2f} s from the click"
     assert app.state.snapshot().result.cancelled
     page.get_by_text("Cancelled").first.wait_for()
     assert page.get_by_role("button", name="Start").is_enabled()
