@@ -11,38 +11,19 @@ import cv2
 import numpy as np
 import pytest
 
-from app_fixtures import free_port, wait_for, write_small_scenes
+from app_fixtures import wait_for
 from l2e_studio.app.browser_js import TUNE_PAUSE_MS
 from l2e_studio.app.panels.view3d import camera_pose
-from test_app_browser import browser, close_webgl_notice, open_tab, slider_root  # noqa: F401 (the fixture)
+from test_app_browser import app, browser, open_app, open_tab, scene_set, slider_root  # noqa: F401 (the fixtures)
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(240)]
-
-
-@pytest.fixture(scope="module")
-def scene_set(tmp_path_factory):
-    from l2e_studio.scenes import load_scene_folder
-
-    return load_scene_folder(write_small_scenes(tmp_path_factory.mktemp("scenes") / "small"))
-
-
-@pytest.fixture
-def app(scene_set, tmp_path):
-    from l2e_studio.app.server import build_app
-
-    a = build_app(scene_set, host="127.0.0.1", port=free_port(), out_dir=tmp_path / "results")
-    yield a
-    a.stop()
 
 
 @pytest.fixture
 def page(browser, app):  # noqa: F811
     context = browser.new_context(viewport={"width": 1366, "height": 768})
     p = context.new_page()
-    p.goto(app.url)
-    p.get_by_text("Use in optimisation").wait_for()
-    p.locator("img[src^='blob:']").first.wait_for()
-    close_webgl_notice(p)
+    open_app(p, app)
     yield p
     context.close()
 

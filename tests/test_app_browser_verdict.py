@@ -20,7 +20,7 @@ from app_fixtures import ARTIFACTS, free_port, wait_for, write_small_scenes
 from l2e_studio.app.text import score_num
 from l2e_studio.geometry import Extrinsic
 from l2e_studio.verdict import Check, JudgeProgress, Verdict
-from test_app_browser import browser, close_webgl_notice  # noqa: F401 (the fixture)
+from test_app_browser import browser, close_webgl_notice, open_app  # noqa: F401 (the fixture)
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(300)]
 SIZE = {"width": 1366, "height": 768}
@@ -49,10 +49,7 @@ def page(browser, app):
     context = browser.new_context(viewport=SIZE, accept_downloads=True)
     context.set_default_timeout(30_000)
     p = context.new_page()
-    p.goto(app.url)
-    p.get_by_text("Use in optimisation").wait_for()
-    p.locator("img[src^='blob:']").first.wait_for()
-    close_webgl_notice(p)
+    open_app(p, app)
     yield p
     context.close()  # before the app stops
 
