@@ -91,16 +91,17 @@ def far_climbs(stack: SceneStack, result: CalibrationResult, settings: Calibrati
     highest points of the far field around the result, picked at the coarsest stage's smoothing
     and scale (where a missed peak nearby has the widest basin). The climbs skip the coarse
     stages: their blur would pull a start near another peak back into the result's wide basin
-    (on KITTI 000008 a start 1.2 deg from the reference went back to a side peak 4.6 deg off)."""
+    (on KITTI 000008 a start 1.2 deg from the reference went back to a side peak 4.6 deg off).
+    ``stack`` at the final smoothing (the verdict's) is used as it is, not prepared again."""
     stages = settings.schedule(stack.camera.width, stack.camera.height)
     coarse = stack.with_sigma(stages[0].sigma, stages[0].scale).thinned(FAR_POINTS)
     _, starts = far_starts(result.extrinsic)
     scores = np.array([coarse.score(e, per_scene=False)[0] for e in starts])
-    final = stack.with_sigma(settings.sigma)
-    local = replace(settings, global_search=False, coarse_to_fine=False)
+    final = stack.with_sigma(settings.sigma)  # ``stack`` itself when it is at the final smoothing
+    local = replace(settings, global_search=False, coarse_to_fine=False)  # one stage: the final smoothing
     ends = []
     for i in np.argsort(-scores)[:FAR_CLIMBS]:
-        end = refine(stack, starts[i], local, cancel, on_progress)
+        end = refine(final, starts[i], local, cancel, on_progress)
         ends.append((end, float(final.score(end, per_scene=False)[0])))
     return tuple(ends)
 

@@ -304,7 +304,7 @@ def judge(
     climbs: tuple = ()
     if len(result.ends) >= 2:  # a global search ran: climb from around the result too
         steps.next("climbs from the far field around the result")
-        climbs = far_climbs(stack, result, settings, cancel, steps.within)
+        climbs = far_climbs(final, result, settings, cancel, steps.within)
     rival = rival_check(result, climbs)
     if rival is not None:
         checks.append(rival)
