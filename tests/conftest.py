@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +16,21 @@ from l2e_studio.synth import SynthConfig, config_with, make_rig, make_scene, wri
 SMALL = config_with(SynthConfig(), n_scenes=4, width=640, height=360, points_per_scan=20_000, seed=11)
 #: the real recordings beside the project (``$L2E_REALDATA`` points elsewhere, e.g. from a git worktree)
 REALDATA = Path(os.environ.get("L2E_REALDATA") or Path(__file__).resolve().parents[2] / "shared" / "realdata")
+
+
+def _browsers_never_outrank_the_app() -> None:
+    """Chromium run as root raises its GPU and compositor threads to nice -8. The test browsers
+    share this machine's cores with the app they test (a user's browser runs on their laptop),
+    and their software-rendered WebGL at that priority starves the app's threads. Dropping
+    CAP_SYS_NICE from this process's bounding set keeps every program the tests start
+    (Playwright's driver, chromium, the CLI) at the priority they were given; without the
+    capability (not root) there is nothing to drop and the call fails harmlessly."""
+    if sys.platform.startswith("linux"):
+        PR_CAPBSET_DROP, CAP_SYS_NICE = 24, 23
+        ctypes.CDLL(None, use_errno=True).prctl(PR_CAPBSET_DROP, CAP_SYS_NICE, 0, 0, 0)
+
+
+_browsers_never_outrank_the_app()
 
 
 @pytest.fixture(scope="session")

@@ -233,21 +233,25 @@ class Runner:
         return bool(pending)
 
     def _push_progress(self) -> None:
-        if not self._score_pending() and self.app.state.snapshot().run.judging is None:
+        # once Cancel is pressed the run's thread has the machine to itself: no curve point is
+        # scored and no overlay drawn beside it (the end of the run does both)
+        cancelling = self._cancel is not None and self._cancel.is_set()
+        if not cancelling and not self._score_pending() and self.app.state.snapshot().run.judging is None:
             self._score_best()
         snap = self.app.state.snapshot()
         self.app.optimise.show_progress(snap.run)
-        if snap.follow_best:
+        if snap.follow_best and not cancelling:
             self.app.overlay_worker.poke()
 
     def _finished(self) -> None:
         app = self.app
         if self._ticker is not None:
             self._ticker.stop(2.0)
-        self._score_pending()  # the points the ticker did not get to (the result's at least)
+        app.optimise.show_progress(app.state.snapshot().run)  # "Cancelled" / "finished" at once
+        app.optimise.show_running(False)
+        self._score_pending()  # then the points the ticker did not get to (the result's at least)
         snap = app.state.snapshot()
         app.optimise.show_progress(snap.run)
-        app.optimise.show_running(False)
         app.event_maps.check()
         app.result_shown(snap)
         run = snap.run
