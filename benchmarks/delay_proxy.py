@@ -5,14 +5,15 @@ in both directions (round trip = 2 x delay), with no limit on bandwidth. It work
 so it carries the app's HTTP and its websocket alike.
 
 Run: ``python benchmarks/delay_proxy.py --target 127.0.0.1:8080 --port 8090 --delay-ms 40``
-(then open http://127.0.0.1:8090). :func:`start_in_thread` runs one inside a benchmark.
+(then open http://127.0.0.1:8090). :class:`DelayProxy` starts one from a benchmark, in a process of its own.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import threading
+import subprocess
+import sys
 import time
 
 
@@ -62,33 +63,27 @@ async def _serve(port: int, target: tuple[str, int], delay: float) -> asyncio.Ab
 
 
 class DelayProxy:
-    """A running proxy (in a thread of its own): ``port`` to connect to, :meth:`stop` to end it."""
+    """A running proxy in a process of its own, as an SSH tunnel is (``ssh`` and ``sshd`` are
+    processes beside the app): run in a thread of the app's process, its copying would compete
+    with the app's drawing for one interpreter and add a delay no tunnel adds. ``port`` to
+    connect to, :meth:`stop` to end it."""
 
     def __init__(self, target: tuple[str, int], delay_ms: float, port: int = 0) -> None:
         self.delay = delay_ms / 1000.0
-        self._loop = asyncio.new_event_loop()
-        started = threading.Event()
-        self._server = None
-
-        def run() -> None:
-            asyncio.set_event_loop(self._loop)
-            self._server = self._loop.run_until_complete(_serve(port, target, self.delay))
-            started.set()
-            self._loop.run_forever()
-
-        self._thread = threading.Thread(target=run, name="delay-proxy", daemon=True)
-        self._thread.start()
-        if not started.wait(10):
+        self._proc = subprocess.Popen(
+            [sys.executable, __file__, "--target", f"{target[0]}:{target[1]}", "--port", str(port),
+             "--delay-ms", str(delay_ms)], stdout=subprocess.PIPE, text=True)
+        line = self._proc.stdout.readline()  # "127.0.0.1:PORT -> host:port, ..." once it listens
+        if not line:
             raise RuntimeError("the delay proxy did not start")
-        self.port = self._server.sockets[0].getsockname()[1]
+        self.port = int(line.split()[0].rsplit(":", 1)[1])
 
     def stop(self) -> None:
-        def close() -> None:
-            self._server.close()
-            self._loop.stop()
-
-        self._loop.call_soon_threadsafe(close)
-        self._thread.join(5)
+        self._proc.terminate()
+        try:
+            self._proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
 
 
 def main() -> None:
@@ -101,7 +96,8 @@ def main() -> None:
 
     async def forever() -> None:
         server = await _serve(args.port, (host, int(port)), args.delay_ms / 1000.0)
-        print(f"127.0.0.1:{args.port} -> {args.target}, {args.delay_ms:g} ms each way", flush=True)
+        listening = server.sockets[0].getsockname()[1]
+        print(f"127.0.0.1:{listening} -> {args.target}, {args.delay_ms:g} ms each way", flush=True)
         async with server:
             await server.serve_forever()
 
