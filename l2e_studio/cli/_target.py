@@ -23,15 +23,15 @@ def board_file(args, folder: Path) -> tuple[Path | None, str]:
     return found, "the scene folder"
 
 
-def run_target(args, scene_set, board_path: Path, how: str, t_start: float, t_loaded: float, progress) -> int:
+def run_target(args, scene_set, board, board_path: Path, how: str, t_start: float, t_loaded: float, progress) -> int:
+    """The checkerboard method on the loaded scenes with ``board`` (read from ``board_path``)."""
     from rich.console import Console
 
     from ..atomic import atomic_write_bytes
     from ..export import result_bytes
-    from ..target import calibrate_target, load_target
+    from ..target import calibrate_target
     from ..target_verdict import judge_target
 
-    board = load_target(board_path)
     print(f"note: checkerboard calibration with the board in {board_path} (from {how}): {board.squares[0]}x"
           f"{board.squares[1]} squares of {1000 * board.square_m:g} mm, {board.size_m[0]:g} x {board.size_m[1]:g} m",
           file=sys.stderr)

@@ -80,10 +80,11 @@ def run(args: argparse.Namespace) -> int:
     from ._target import board_file, run_target
 
     board_path, board_how = board_file(args, folder)
+    board = None
     if board_path is not None:
         from ..target import load_target
 
-        load_target(board_path)  # a bad board file is one line before any loading
+        board = load_target(board_path)  # a bad board file is one line before any loading
 
     with _progress(args.quiet, err) as prog:
         task = prog.add_task("loading scenes", total=None)
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {note}", file=sys.stderr)
     t_loaded = time.perf_counter()
     if board_path is not None and not args.targetless:
-        return run_target(args, scene_set, board_path, board_how, t_start, t_loaded, _progress)
+        return run_target(args, scene_set, board, board_path, board_how, t_start, t_loaded, _progress)
 
     seed = scene_set.seed
     check_seed_coverage([sc.points for sc in scene_set.scenes], scene_set.camera, seed, scene_set.seed_source)
@@ -123,8 +124,8 @@ def run(args: argparse.Namespace) -> int:
         with _progress(args.quiet, err) as prog:
             prog.add_task("judging the result (halves, second start, second score)", total=None)
             verdict = judge(stack, result, settings, on_untrusted=args.on_untrusted)
-        if board_path is not None:
-            verdict = _with_boards(verdict, scene_set, board_path, board_how, args)
+        if board is not None:
+            verdict = _with_boards(verdict, scene_set, board, board_path, board_how, args)
 
     quality = None
     if args.check:
@@ -157,14 +158,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _with_boards(verdict, scene_set, board_path: Path, how: str, args):
+def _with_boards(verdict, scene_set, board, board_path: Path, how: str, args):
     """The verdict with the boards in view as evidence the optimiser never climbed."""
     from rich.console import Console
 
-    from ..target import load_target
     from ..target_verdict import with_boards
 
-    board = load_target(board_path)
     print(f"note: the result is checked against the board in {board_path} (from {how})", file=sys.stderr)
     with _progress(args.quiet, Console(stderr=True)) as prog:
         prog.add_task("checking the result against the boards", total=None)
