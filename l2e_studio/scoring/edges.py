@@ -108,10 +108,17 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
     return w.astype(np.float32)
 
 
+def magnitude(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """``sqrt(gx² + gy²)``, the same to the bit wherever the arrays sit in memory (OpenCV's
+    ``magnitude`` is not: its vector and scalar paths differ in the last bit, so one map
+    prepared twice could differ, and with it an optimiser's path)."""
+    return np.sqrt(gx * gx + gy * gy)
+
+
 def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1."""
     g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
-    m = cv2.magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+    m = magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
     p99 = float(np.percentile(m, 99))
     if p99 <= 0:
         return np.zeros_like(m)
@@ -136,7 +143,7 @@ def canny_distance(image: np.ndarray) -> np.ndarray:
     gradient's own percentiles, so they follow the image's contrast)."""
     g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.5)
     g8 = cv2.normalize(g, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
-    grad = cv2.magnitude(cv2.Sobel(g8, cv2.CV_32F, 1, 0), cv2.Sobel(g8, cv2.CV_32F, 0, 1))
+    grad = magnitude(cv2.Sobel(g8, cv2.CV_32F, 1, 0), cv2.Sobel(g8, cv2.CV_32F, 0, 1))
     hi = float(np.percentile(grad, 90))
     edges = cv2.Canny(g8, 0.5 * hi, hi, L2gradient=True)
     if not edges.any():
