@@ -143,8 +143,10 @@ def _line_grid(crop: np.ndarray, pattern: tuple[int, int]) -> tuple[np.ndarray |
     up, scale, cell = upscale(crop)
     for local, erode in LINE_TRIALS:
         picture, _ = checker_picture(up, cell, local, erode)
-        if picture is not None:
-            corners = _quads(picture, pattern, 1)
+        if picture is None:
+            continue
+        for inverted in (False, True):  # which colour is white: the quad detector wants the margin white
+            corners = _quads(255 - picture if inverted else picture, pattern, 1)
             if corners is not None:
                 return _to_original(corners, scale), (f"findChessboardCorners on the event lines two-coloured "
                                                       f"(x{scale}, lines > {local:g} x local mean) + cornerSubPix")

@@ -90,6 +90,13 @@ def cell_cores(lines: np.ndarray, cell: float, erode: int) -> tuple[np.ndarray, 
     return cores, n
 
 
+def touching_border(labels: np.ndarray, n: int) -> np.ndarray:
+    """Per label: whether it reaches the crop's border (the room around the board)."""
+    out = np.zeros(n, bool)
+    out[np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])] = True
+    return out
+
+
 def partition(cores: np.ndarray, black: np.ndarray, white: np.ndarray, shift: float
               ) -> tuple[np.ndarray, np.ndarray]:
     """Every pixel given to the nearest core; the distances to black cores less ``shift / 2``,
@@ -164,16 +171,17 @@ def two_colour(graph: dict[int, set[int]], area: np.ndarray) -> dict[int, int]:
     return {c: colour[c] for c, g in group.items() if g == best}
 
 
-def balance(labels: np.ndarray, f: np.ndarray, black: np.ndarray, white: np.ndarray, outside: int,
+def balance(labels: np.ndarray, f: np.ndarray, black: np.ndarray, white: np.ndarray, skip: np.ndarray,
             cell: float) -> float:
     """The shift of every black/white edge (px, along ``f``) that gives black and white cells
-    the same mean area, as a checkerboard's squares have (the margin, ``outside``, left out)."""
-    inside = (black | white)[labels]
-    g = f[inside]
-    inner = labels[inside] != outside
-    n_black, n_white = max(1, int(black.sum())), max(1, int(white.sum()) - 1)
+    the same mean area, as a checkerboard's squares have; cells flagged in ``skip`` (the margin
+    around the squares, the room) are left out."""
+    keep = (black | white) & ~skip
+    inside = keep[labels]
+    g, lab = f[inside], labels[inside]
+    n_black, n_white = max(1, int((black & keep).sum())), max(1, int((white & keep).sum()))
     shifts = np.linspace(-cell / 3, cell / 3, 61)
-    gap = [abs(np.count_nonzero(g < c) / n_black - np.count_nonzero((g >= c) & inner) / n_white) for c in shifts]
+    gap = [abs(np.count_nonzero(g < c) / n_black - np.count_nonzero(g >= c) / n_white) for c in shifts]
     return float(shifts[int(np.argmin(gap))])
 
 
@@ -193,7 +201,7 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float) -
         if len(colour) < 4:
             return None, "the event lines enclose no two-colourable grid of cells"
         cells = np.array(list(colour))
-        outside = int(cells[np.argmax(area[cells])])  # the margin around the squares: white
+        outside = int(cells[np.argmax(area[cells])])  # the room or the margin around the squares
         is_white = np.array([colour[c] == colour[outside] for c in cells])
         new_black, new_white = np.zeros(n, bool), np.zeros(n, bool)
         new_black[cells[~is_white]], new_white[cells[is_white]] = True, True
@@ -201,7 +209,9 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float) -
             break
         black, white = new_black, new_white
         labels, f = partition(cores, black, white, 0.0)
-        shift = balance(labels, f, black, white, outside, cell)
+        area = np.bincount(labels.ravel(), minlength=n)
+        skip = touching_border(labels, n) | (area > 2 * cell**2)  # the room, the margin, merged cells
+        shift = balance(labels, f, black, white, skip, cell)
     labels, f = partition(cores, black, white, shift)
     inside = (black | white)[labels]
     picture = np.full(labels.shape, 128.0, np.float32)
