@@ -142,7 +142,7 @@ def _line_grid(crop: np.ndarray, pattern: tuple[int, int]) -> tuple[np.ndarray |
     (:mod:`.event_lines`), refined there; corners in ``crop``'s pixels, or None."""
     up, scale, cell = upscale(crop)
     for local, erode in LINE_TRIALS:
-        picture, _ = checker_picture(up, cell, local, erode)
+        picture, _ = checker_picture(up, cell, local, erode, (pattern[0] + 1) * (pattern[1] + 1))
         if picture is None:
             continue
         for inverted in (False, True):  # which colour is white: the quad detector wants the margin white

@@ -41,6 +41,10 @@ BLUR_CELLS = 0.04
 MIN_SHARED_SIDE = 0.65
 #: colourings, each on the cells split where the last one's colours balance
 PASSES = 3
+#: a map with more cells than this many times the board's squares is no board's lines
+MAX_CELLS = 4
+#: the upscaled crop's longest side (px) at most
+MAX_SIDE = 1600
 #: a core smaller than this share of a cell's area is speckle
 MIN_CORE_SHARE = 0.01
 
@@ -62,7 +66,7 @@ def upscale(grey: np.ndarray) -> tuple[np.ndarray, int, float]:
     """``grey`` (a crop around the board) upscaled so that a cell (the lines' period) spans
     about ``CELL_PX``; the factor (1..6) and the cell's side there (px)."""
     period = line_period(grey)
-    scale = int(np.clip(round(CELL_PX / period), 1, 6))
+    scale = int(np.clip(min(round(CELL_PX / period), MAX_SIDE // max(grey.shape)), 1, 6))
     if scale == 1:
         return grey, 1, period
     return cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC), scale, period * scale
@@ -137,12 +141,12 @@ def neighbours(labels: np.ndarray, n: int, cell: float) -> dict[int, set[int]]:
     return graph
 
 
-def two_colour(graph: dict[int, set[int]], area: np.ndarray) -> dict[int, int]:
+def two_colour(graph: dict[int, set[int]], area: np.ndarray, max_drops: int = 1000) -> dict[int, int]:
     """Colour 0/1 of the largest group of cells two-coloured without conflict: while some
     neighbours share a colour (an odd cycle: a line missing), the cell on most conflicts is
-    dropped and the rest coloured again."""
+    dropped and the rest coloured again; more than ``max_drops`` such cells: nothing ({})."""
     dropped: set[int] = set()
-    while True:
+    while len(dropped) <= max_drops:
         colour: dict[int, int] = {}
         group: dict[int, int] = {}
         conflicts: dict[int, int] = {}
@@ -164,6 +168,8 @@ def two_colour(graph: dict[int, set[int]], area: np.ndarray) -> dict[int, int]:
         if not conflicts:
             break
         dropped.add(max(conflicts, key=lambda c: (conflicts[c], area[c])))
+    else:
+        return {}
     if not group:
         return {}
     roots, sizes = np.unique(list(group.values()), return_counts=True)
@@ -185,19 +191,23 @@ def balance(labels: np.ndarray, f: np.ndarray, black: np.ndarray, white: np.ndar
     return float(shifts[int(np.argmin(gap))])
 
 
-def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float) -> tuple[np.ndarray | None, str]:
+def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float, squares: int
+                    ) -> tuple[np.ndarray | None, str]:
     """The two-coloured picture of an event-line map upscaled to ~``CELL_PX`` a cell (uint8,
-    grey where uncoloured; ``erode`` in cells), or ``(None, reason)``."""
+    grey where uncoloured; ``erode`` in cells) of a board of ``squares`` squares, or
+    ``(None, reason)``: far more cells than the board has (noise, texture) is no board."""
     lines = line_mask(grey, cell, local)
     if not lines.any():
         return None, "no event lines"
     cores, n = cell_cores(lines, cell, int(round(erode * cell)))
+    if n - 1 > MAX_CELLS * squares:
+        return None, f"{n - 1} cells between the lines, over {MAX_CELLS} x the board's {squares} squares"
     black, white = np.zeros(n, bool), np.zeros(n, bool)
     shift, outside = 0.0, 0
     for _ in range(PASSES):
         labels, f = partition(cores, black, white, shift)
         area = np.bincount(labels.ravel(), minlength=n)
-        colour = two_colour(neighbours(labels, n, cell), area)
+        colour = two_colour(neighbours(labels, n, cell), area, max_drops=squares // 2)
         if len(colour) < 4:
             return None, "the event lines enclose no two-colourable grid of cells"
         cells = np.array(list(colour))
