@@ -129,28 +129,35 @@ def find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, st
             corners = _quads(crop, pattern, scale)
             if corners is not None:
                 return corners + (x0, y0), f"findChessboardCorners, board region x{scale} + cornerSubPix"
+    lines = ""
     for x0, y0, crop in regions:
         corners, how = _line_grid(crop, pattern)
         if corners is not None:
             return corners + (x0, y0), how
+        lines = lines or how
     return None, (f"no {pattern[0]}x{pattern[1]} inner-corner grid found (quad detector at 1x and 2x, "
-                  "sector detector, bright regions upscaled, event lines two-coloured)")
+                  "sector detector, bright regions upscaled, event lines two-coloured"
+                  + (f": {lines}" if lines else "") + ")")
 
 
 def _line_grid(crop: np.ndarray, pattern: tuple[int, int]) -> tuple[np.ndarray | None, str]:
     """Stage 5: the quad detector on the two-coloured picture of a moving board's event lines
-    (:mod:`.event_lines`), refined there; corners in ``crop``'s pixels, or None."""
+    (:mod:`.event_lines`), refined there, either polarity; corners in ``crop``'s pixels, or
+    ``(None, reason)``."""
     up, scale, cell = upscale(crop)
+    why = ""
     for local, erode in LINE_TRIALS:
-        picture, _ = checker_picture(up, cell, local, erode, (pattern[0] + 1) * (pattern[1] + 1))
+        picture, reason = checker_picture(up, cell, local, erode, (pattern[0] + 1) * (pattern[1] + 1))
         if picture is None:
+            why = why or reason
             continue
         for inverted in (False, True):  # which colour is white: the quad detector wants the margin white
             corners = _quads(255 - picture if inverted else picture, pattern, 1)
             if corners is not None:
                 return _to_original(corners, scale), (f"findChessboardCorners on the event lines two-coloured "
                                                       f"(x{scale}, lines > {local:g} x local mean) + cornerSubPix")
-    return None, ""
+        why = "cells two-coloured, but not into the board's full grid"
+    return None, why
 
 
 def _quads(grey: np.ndarray, pattern: tuple[int, int], scale: int) -> np.ndarray | None:

@@ -1,26 +1,32 @@
-"""A moving board's event map as a checkerboard picture: two-colouring the grid of event lines.
+"""A shaken board's event map made a checkerboard picture again: the cells between its event
+lines two-coloured.
 
-A board shaken before an event camera fires events where its brightness changes: along the
-squares' edges and the board's outline. The accumulated (unsigned) event map is a grid of bright
-lines on a dark field, black and white squares alike empty, so no chessboard detector sees a
-checkerboard in it. The grid's cells are recovered and two-coloured instead:
+A board shaken before an event camera fires events where its brightness changes: at the
+squares' edges and the board's outline. The accumulated (unsigned) map is a grid of bright lines
+on a dark field, black and white squares alike empty, so no chessboard detector sees a
+checkerboard in it. Here the cells are recovered and two-coloured:
 
-1. the map is cleaned (3x3 median: noise events and hot pixels), blurred by 1 px and
-   thresholded: the lines (Otsu's threshold, and half of it for faint lines);
-2. the empty region between the lines is eroded by ``r`` px (closing gaps where lines cross)
-   and labelled (4-connected): the cells' cores; cores touching the image border are the room,
-   not the board, and are left uncoloured;
-3. every pixel within reach of a core takes the nearest core's label (the lines split down their
-   middle, the edge's mean position over the shake); two cells are neighbours when their shared
-   border is a good part of a side (corner-to-corner cells share only a point);
-4. the neighbour graph is two-coloured breadth-first; cells on an odd cycle (a line missing
-   where the motion ran along it merges cells of both colours) are dropped and the colouring
-   repeated; only the largest coloured group is kept;
-5. the picture: one colour black, the other white (the largest cell, the board's margin, is
-   white), everything else mid-grey, blurred by ``BLUR_PX``; the ordinary detectors run on it.
+1. the crop around the board is upscaled (cubic) so that a cell, the lines' period (the power
+   spectrum's peak), spans ~``CELL_PX``;
+2. the lines: brighter than a factor of the local mean (over 1.5 cells) and than a quarter of
+   Otsu's threshold (noise events); what is left between them, eroded a little (lines crossing
+   at a corner leave gaps), are the cells' cores (4-connected; specks dropped);
+3. every pixel goes to the nearest core; two cells are neighbours when they share a border of
+   most of a side (cells meeting at a corner share a point);
+4. the neighbour graph is two-coloured breadth-first; the cell on most conflicts (an odd cycle:
+   a line missing where the shake ran along it merges cells of both colours) is dropped and the
+   rest coloured again; only the largest consistent group is kept;
+5. an event counts a step in log intensity, so the lines spread further into the dark squares
+   than into the light ones and the plain split in 3 makes one colour's cells smaller: the split
+   is shifted by the one offset that gives both colours the same mean cell area, and 3-4 are
+   repeated on that split;
+6. the picture: a soft step at the split, mid-grey where uncoloured. A corner there is where the
+   edges' mean positions over the shake cross: the board's pose on average.
 
-A frame whose lines cannot be two-coloured into the board's grid is not found; nothing is
-guessed (the detectors still need the full inner-corner grid, and the pose its reprojection).
+The quad detector then needs the full inner-corner grid and the pose its reprojection, as for
+any image (:mod:`.detect`, stage 5); a map whose lines do not two-colour into the board's grid is
+not found, nothing is guessed. Measured on synthetic shaken boards (``events-moving``): found
+where both edge families fired, corners ~0.2 px RMS from the truth; ``benchmarks/bench_target.py``.
 """
 
 from __future__ import annotations
@@ -184,7 +190,7 @@ def balance(labels: np.ndarray, f: np.ndarray, black: np.ndarray, white: np.ndar
     around the squares, the room) are left out."""
     keep = (black | white) & ~skip
     inside = keep[labels]
-    g, lab = f[inside], labels[inside]
+    g = f[inside]
     n_black, n_white = max(1, int((black & keep).sum())), max(1, int((white & keep).sum()))
     shifts = np.linspace(-cell / 3, cell / 3, 61)
     gap = [abs(np.count_nonzero(g < c) / n_black - np.count_nonzero(g >= c) / n_white) for c in shifts]
@@ -203,7 +209,7 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float, s
     if n - 1 > MAX_CELLS * squares:
         return None, f"{n - 1} cells between the lines, over {MAX_CELLS} x the board's {squares} squares"
     black, white = np.zeros(n, bool), np.zeros(n, bool)
-    shift, outside = 0.0, 0
+    shift = 0.0
     for _ in range(PASSES):
         labels, f = partition(cores, black, white, shift)
         area = np.bincount(labels.ravel(), minlength=n)
@@ -211,7 +217,7 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float, s
         if len(colour) < 4:
             return None, "the event lines enclose no two-colourable grid of cells"
         cells = np.array(list(colour))
-        outside = int(cells[np.argmax(area[cells])])  # the room or the margin around the squares
+        outside = int(cells[np.argmax(area[cells])])  # the room or the margin around the squares: white
         is_white = np.array([colour[c] == colour[outside] for c in cells])
         new_black, new_white = np.zeros(n, bool), np.zeros(n, bool)
         new_black[cells[~is_white]], new_white[cells[is_white]] = True, True
