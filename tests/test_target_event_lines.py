@@ -32,7 +32,7 @@ def _line_map(pose: Extrinsic, squares: tuple[int, int], rng, width: int = 3) ->
     cols, rows = squares
     s = BOARD.square_m
     img = np.zeros((CAM.height, CAM.width), np.float32)
-    black = lambda i, j: 0 <= i < cols and 0 <= j < rows and (i + j) % 2 == 0  # noqa: E731 (top-left black)
+    black = lambda i, j: 0 <= i < cols and 0 <= j < rows and (i + j) % 2 == 0
     segments = []  # every side of a black square: the edges between black and white (or the margin)
     for i in range(cols):
         for j in range(rows):
@@ -116,7 +116,7 @@ def test_two_colouring_drops_the_cells_of_an_odd_cycle(odd):
     of one colour, as a missing line leaves them) makes an odd cycle: its cells are dropped,
     the rest keep one consistent colouring."""
     graph: dict[int, set[int]] = {}
-    cell = lambda r, c: 1 + 4 * r + c  # noqa: E731
+    cell = lambda r, c: 1 + 4 * r + c
     for r in range(4):
         for c in range(4):
             for rr, cc in ((r + 1, c), (r, c + 1)):

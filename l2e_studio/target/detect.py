@@ -46,7 +46,8 @@ from ..cachedir import user_cache_dir
 from ..camera import CameraModel
 from ..geometry import Extrinsic, distort, project_points
 from .board import Board
-from .event_lines import TRIALS as LINE_TRIALS, checker_picture, upscale
+from .event_lines import TRIALS as LINE_TRIALS
+from .event_lines import checker_picture, upscale
 
 #: bump when detection changes, so stale cache entries are not used
 DETECTOR_VERSION = 3

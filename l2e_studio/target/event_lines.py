@@ -205,7 +205,7 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float, s
     lines = line_mask(grey, cell, local)
     if not lines.any():
         return None, "no event lines"
-    cores, n = cell_cores(lines, cell, int(round(erode * cell)))
+    cores, n = cell_cores(lines, cell, round(erode * cell))
     if n - 1 > MAX_CELLS * squares:
         return None, f"{n - 1} cells between the lines, over {MAX_CELLS} x the board's {squares} squares"
     black, white = np.zeros(n, bool), np.zeros(n, bool)
