@@ -104,12 +104,12 @@ def board_errors(out: Path) -> list:
         if not d.found:
             errs.append(None)
             continue
-        g, m = _board_pose_error(d.pose, poses[d.name], board)
+        g, m = _board_pose_error(d.pose, poses[d.name])
         errs.append((1000 * m, g))
     return errs
 
 
-def _board_pose_error(pose: Extrinsic, truth: Extrinsic, board) -> tuple[float, float]:
+def _board_pose_error(pose: Extrinsic, truth: Extrinsic) -> tuple[float, float]:
     """deg / m between two board poses, the 180 deg turn of a symmetric grid's numbering allowed."""
     flip = Extrinsic(np.array([0.0, 0.0, np.pi]), np.zeros(3))
     return min((truth.error_to(pose.compose(f)) for f in (Extrinsic(np.zeros(3), np.zeros(3)), flip)),
