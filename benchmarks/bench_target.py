@@ -69,9 +69,10 @@ def synthetic(count: int, folder: Path) -> None:
     """Median error against the truth of ``count`` synthetic board sequences (10 poses each) per modality."""
     print(f"== synthetic boards (l2e-studio synth --target checkerboard, 10 poses, {count} sequences per modality)")
     for modality in ("frame", "e2vid", "events", "events-moving"):
-        errs, trusted, rates, fails = [], 0, [], 0
+        errs, trusted, rates, fails, boards = [], 0, [], 0, []
         for k in range(count):
             truth, r = synthetic_run(modality, k, folder)
+            boards.append(board_errors(folder / f"{modality}{k}"))
             if r is None:
                 fails += 1
                 continue
@@ -83,6 +84,36 @@ def synthetic(count: int, folder: Path) -> None:
         print(f"   {modality}: median error {med[0]:.2f} mm / {med[1]:.3f} deg over {len(errs)} "
               f"(each: {', '.join(f'{a:.1f} mm {b:.2f} deg' for a, b in errs)}), trusted {trusted}/{count}, "
               f"detected {100 * np.mean(rates) if rates else 0:.0f} %" + (f"; {fails} found too few boards" if fails else ""))
+        found = [e for b in boards for e in b if e is not None]
+        total = sum(len(b) for b in boards)
+        med = np.median(np.array(found), axis=0) if found else (np.nan, np.nan)
+        print(f"      boards found {len(found)}/{total} ({100 * len(found) / max(total, 1):.0f} %), camera board pose "
+              f"median error {med[0]:.1f} mm / {med[1]:.3f} deg against the truth")
+
+
+def board_errors(out: Path) -> list:
+    """Per frame of a synthetic sequence: the detected board pose's error against the true
+    one (mm, deg), None where no board was found (the detections are cached)."""
+    from l2e_studio.synth.board_dataset import read_board_poses
+
+    ss = load_scene_folder(out)
+    poses = read_board_poses(out / "truth.yaml")
+    board = load_target(out / "target.yaml")
+    errs = []
+    for d in detect_frames(ss.scenes, ss.camera, board):
+        if not d.found:
+            errs.append(None)
+            continue
+        g, m = _board_pose_error(d.pose, poses[d.name])
+        errs.append((1000 * m, g))
+    return errs
+
+
+def _board_pose_error(pose: Extrinsic, truth: Extrinsic) -> tuple[float, float]:
+    """deg / m between two board poses, the 180 deg turn of a symmetric grid's numbering allowed."""
+    flip = Extrinsic(np.array([0.0, 0.0, np.pi]), np.zeros(3))
+    return min((truth.error_to(pose.compose(f)) for f in (Extrinsic(np.zeros(3), np.zeros(3)), flip)),
+               key=lambda e: e[0])
 
 
 def calibration(count: int, folder: Path) -> None:

@@ -13,7 +13,12 @@ order until one finds the full grid (measured on the dev sets, benchmarks/bench_
    (Otsu on the blurred image, closed), each cropped with a margin. A flashing board's event
    map is a bright, speckled board on a dark field, often only ~100 px wide: on the whole image
    the speckle defeats the detectors (10 of 20 synthetic flashing boards found), on the region
-   every one is (20 of 20, 25 ms a frame).
+   every one is (20 of 20, 25 ms a frame);
+5. the quad detector on a moving board's event lines made a checkerboard picture again
+   (:mod:`.event_lines`: the cells between the lines two-coloured), in each bright region. A
+   shaken board's map shows the squares' edges as bright lines, black and white squares alike
+   empty: no chessboard detector sees a checkerboard in it (0 of 30 synthetic shaken boards
+   found by stages 1-4).
 
 Before detection the image is stretched to 0..255 between its 0.5th and 99.5th percentiles
 (event maps are counts, reconstructions are often low contrast). A frame where none finds the
@@ -41,9 +46,11 @@ from ..cachedir import user_cache_dir
 from ..camera import CameraModel
 from ..geometry import Extrinsic, distort, project_points
 from .board import Board
+from .event_lines import TRIALS as LINE_TRIALS
+from .event_lines import checker_picture, upscale
 
 #: bump when detection changes, so stale cache entries are not used
-DETECTOR_VERSION = 2
+DETECTOR_VERSION = 3
 #: a detection whose corners reproject worse than this (px, at 1280 px wide) is not a board
 MAX_REPROJECTION_PX = 3.0
 
@@ -117,13 +124,41 @@ def find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray | None, st
     ok, corners = cv2.findChessboardCornersSB(grey, pattern, flags=sb)
     if ok:
         return corners.reshape(-1, 2).astype(np.float64), "findChessboardCornersSB"
-    for x0, y0, crop in bright_regions(grey):
+    regions = bright_regions(grey)
+    for x0, y0, crop in regions:
         for scale in REGION_SCALES:
             corners = _quads(crop, pattern, scale)
             if corners is not None:
                 return corners + (x0, y0), f"findChessboardCorners, board region x{scale} + cornerSubPix"
+    lines = ""
+    for x0, y0, crop in regions:
+        corners, how = _line_grid(crop, pattern)
+        if corners is not None:
+            return corners + (x0, y0), how
+        lines = lines or how
     return None, (f"no {pattern[0]}x{pattern[1]} inner-corner grid found (quad detector at 1x and 2x, "
-                  "sector detector, bright regions upscaled)")
+                  "sector detector, bright regions upscaled, event lines two-coloured"
+                  + (f": {lines}" if lines else "") + ")")
+
+
+def _line_grid(crop: np.ndarray, pattern: tuple[int, int]) -> tuple[np.ndarray | None, str]:
+    """Stage 5: the quad detector on the two-coloured picture of a moving board's event lines
+    (:mod:`.event_lines`), refined there, either polarity; corners in ``crop``'s pixels, or
+    ``(None, reason)``."""
+    up, scale, cell = upscale(crop)
+    why = ""
+    for local, erode in LINE_TRIALS:
+        picture, reason = checker_picture(up, cell, local, erode, (pattern[0] + 1) * (pattern[1] + 1))
+        if picture is None:
+            why = why or reason
+            continue
+        for inverted in (False, True):  # which colour is white: the quad detector wants the margin white
+            corners = _quads(255 - picture if inverted else picture, pattern, 1)
+            if corners is not None:
+                return _to_original(corners, scale), (f"findChessboardCorners on the event lines two-coloured "
+                                                      f"(x{scale}, lines > {local:g} x local mean) + cornerSubPix")
+        why = "cells two-coloured, but not into the board's full grid"
+    return None, why
 
 
 def _quads(grey: np.ndarray, pattern: tuple[int, int], scale: int) -> np.ndarray | None:
