@@ -267,6 +267,7 @@ class OverlayPanel:
         # forgets it, so the next one tries full width again
         self._fitted[key] = (image.shape[1] if image.shape[1] < full else None, quality)
         send_jpeg(self.image, image, data)
+        self.app.server.flush()  # the frame leaves now, not after viser's 16 ms message window
         self.window, self.rest_frame = window, rest
         self.frame_bytes, self.frame_quality = len(data), quality
         self.frames += 1
