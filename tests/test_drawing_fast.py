@@ -138,7 +138,7 @@ def test_jpeg_search_from_the_last_quality_finds_the_same_answer_in_two_encodes(
                 assert len(encodes) <= 2  # the answer and its better neighbour
 
 
-def test_the_extrinsics_transform_by_opencv_matches_the_matrix_product():
+def test_the_extrinsics_transform_keeps_dtype_and_shape_and_matches_the_matrix_product():
     cam, pts, colors, ext, base = scan(5_000)
     ext = ext.perturbed([0.3, -0.2, 0.1], [0.05, -0.02, 0.03])
     for points in (pts, pts.astype(np.float64), pts[:1], pts[:0], pts[0]):
