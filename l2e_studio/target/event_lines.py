@@ -228,7 +228,8 @@ def checker_picture(grey: np.ndarray, cell: float, local: float, erode: float, s
         area = np.bincount(labels.ravel(), minlength=n)
         skip = touching_border(labels, n) | (area > 2 * cell**2)  # the room, the margin, merged cells
         shift = balance(labels, f, black, white, skip, cell)
-    labels, f = partition(cores, black, white, shift)
+    else:  # no pass settled: split once more at the last balance (a settled pass already did)
+        labels, f = partition(cores, black, white, shift)
     inside = (black | white)[labels]
     picture = np.full(labels.shape, 128.0, np.float32)
     picture[inside] = 255.0 * np.clip(0.5 + f[inside] / (2 * BLUR_CELLS * cell), 0, 1)
