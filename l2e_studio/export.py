@@ -214,7 +214,9 @@ def export_status(result: dict | None) -> tuple[str, list[str]]:
         else:
             lines.append("translation: the SEED's translation, not calibrated (these scenes do not pin it down); "
                          "only the rotation was calibrated and checked")
-    elif status == "not-trusted":
+    if status in ("trusted", "trusted-rotation") and isinstance(v.get("within_spread"), dict):
+        lines.append("within the result's own spread the SEED's values stand: " + str(v["within_spread"].get("note", "")))
+    if status == "not-trusted":
         lines.append("this is the SEED, not a calibration: the result was not trusted" if v.get("kept_seed", True)
                      else "this is the optimiser's result, which was NOT TRUSTED")
     elif status == NOT_JUDGED:

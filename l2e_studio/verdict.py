@@ -31,6 +31,11 @@ and both halves prefer that to the seed; when the rotation's checks failed too, 
 to the seed's translation gets a second chance on the same evidence. Otherwise ``not-trusted``:
 the seed is handed back (the default) or the result is kept and marked, as the caller chooses;
 each failed check gives one line of why.
+
+A trusted result is handed back only as far as it moved significantly: where the rotation turned,
+or the translation moved along an axis, by less than twice the spread of the independent
+estimates (the halves refined alone, the second start), the seed's stands (:func:`settle`), and
+the verdict says so. A seed already at the peak is confirmed, not nudged by the estimate's scatter.
 """
 
 from __future__ import annotations
@@ -65,6 +70,11 @@ EDGE_RADIUS_PX = 3.0  # an edge point "lands on" a Canny edge within this distan
 SECOND_SCORE_SLACK = 0.005  # the second score may not drop by more than this (share of edge weight)
 MIRROR_DEG, MIRROR_M = 1.0, 0.05  # the second start is at least this far from the result
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
+#: A move from the seed is handed back only where it exceeds this many times the spread of the
+#: independent estimates (each half refined alone, the second start): a smaller move cannot be
+#: told from the estimate's own scatter, and the seed stands (a released calibration checked
+#: again is confirmed, not nudged by noise).
+SIGNIFICANT = 2.0
 #: Per camera axis: what moves its translation, and what to record when the scenes do not pin it.
 AXIS_ADVICE = {
     "x": "add scenes with near objects (a few metres) whose vertical edges stand in front of a far background",
@@ -87,6 +97,13 @@ class Verdict:
     translation: tuple["AxisPinned", ...] = ()
     #: the axes whose translation is the seed's in what is handed back (``trusted-rotation``)
     seed_axes: str = "xyz"
+    #: how far independent estimates landed from the result (see :class:`Spread`); None: not measured
+    spread: "Spread | None" = None
+    #: What of the seed stands although the result is trusted, because the result's move from it
+    #: was within SIGNIFICANT x its spread: the rotation, and translation axes (beyond ``seed_axes``)
+    seed_rotation: bool = False
+    settled_axes: str = ""
+    settled: str = ""  # that, in one sentence ("" when nothing)
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -96,8 +113,21 @@ class Verdict:
     def trusted(self) -> bool:
         return self.status != "not-trusted"
 
+    @property
+    def seed_stands(self) -> bool:
+        """What is handed back is the seed itself, confirmed: the result is within its own spread of it."""
+        return self.trusted and self.seed_rotation and set(self.seed_axes + self.settled_axes) >= set("xyz")
+
     def summary(self) -> str:
         """One line a user understands (the reasons are in ``reasons``)."""
+        if self.seed_stands:
+            unpinned = "" if self.status == "trusted" else "; the scenes do not pin its translation" + (
+                "" if set(self.seed_axes) >= set("xyz") else " along " + ", ".join(self.seed_axes)) + " down"
+            return "the seed stands, confirmed: " + self.settled + unpinned
+        line = self._summary()
+        return f"{line}; {self.settled}" if self.settled else line
+
+    def _summary(self) -> str:
         if self.status == "trusted":
             return "trusted: both halves of the data, a second start and an independent score agree with the result"
         if self.status == "trusted-rotation" and self.seed_axes != "xyz":
@@ -108,6 +138,15 @@ class Verdict:
         if self.status == "trusted-rotation":
             return "rotation trusted; the translation is not pinned down by these scenes, the seed's translation is kept"
         return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")
+
+    def from_seed(self) -> list[str]:
+        """What of the seed is in what is handed back although the verdict trusts the result (the
+        rotation, the translation or some of its axes), in words; [] when none is."""
+        if not self.trusted:
+            return []
+        axes = "".join(a for a in "xyz" if a in self.settled_axes or (self.status == "trusted-rotation" and a in self.seed_axes))
+        return ((["rotation"] if self.seed_rotation else [])
+                + (["translation"] if axes == "xyz" else [f"translation along {', '.join(axes)}"] if axes else []))
 
     def advice(self) -> list[str]:
         """One line per translation axis the scenes do not pin: which, and what to record."""
@@ -124,6 +163,9 @@ class Verdict:
             "summary": self.summary(),
             "kept_seed": self.kept_seed,
             **({"translation_from_seed": list(self.seed_axes)} if self.status == "trusted-rotation" else {}),
+            **({"within_spread": {"rotation_from_seed": self.seed_rotation, "translation_from_seed": list(self.settled_axes),
+                                  "note": self.settled}} if self.settled else {}),
+            **({"spread": self.spread.to_dict()} if self.spread is not None else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
@@ -174,6 +216,54 @@ class _Steps:
         if self.on_progress is not None:
             self.on_progress(JudgeProgress(self.step, self.total, self.label,
                                            min(1.0, (self.step - 1 + inner) / self.total), time.perf_counter() - self.t0))
+
+
+@dataclass(frozen=True)
+class Spread:
+    """How far the independent estimates of a result landed from it (the largest of: each half of
+    the data refined alone, the second start): its rotation in degrees, its translation in metres
+    (nan where only the rotation was estimated)."""
+
+    deg: float
+    m: float = float("nan")
+
+    def to_dict(self) -> dict:
+        return {"rotation_deg": round(self.deg, 4), **({} if np.isnan(self.m) else {"translation_m": round(self.m, 4)})}
+
+
+def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
+           sides: Callable[[], list[SceneStack]]) -> tuple[Extrinsic, bool, str, str]:
+    """``handed`` with the seed's rotation, and the seed's translation along the axes outside
+    ``seed_axes``, wherever its move from the seed is within SIGNIFICANT x ``spread``.
+    Returns (extrinsic, rotation is the seed's, those translation axes, one sentence). A partial
+    mix must still score above the seed on each of ``sides()`` (the data and its halves), else the
+    seed stands whole: the significant part alone was not what the data preferred."""
+    turn = seed.error_to(Extrinsic(handed.rotvec, seed.translation))[0]
+    keep_rot = turn <= SIGNIFICANT * spread.deg
+    moved = np.abs(handed.translation - seed.translation)
+    mine = np.array([a not in seed_axes for a in "xyz"])  # the result's translation axes
+    if np.array_equal(handed.matrix, seed.matrix):
+        return seed, True, "".join(a for a, k in zip("xyz", mine) if k), "the optimiser ended at the seed itself"
+    keep_t = mine & ~(moved > SIGNIFICANT * spread.m)  # (a spread of nan keeps only what did not move)
+    shown_rot, shown_t = keep_rot and turn > 1e-9, keep_t & (moved > 1e-12)  # kept, and not the same anyway
+    if not shown_rot and not shown_t.any():
+        return handed, False, "", ""
+    parts = []
+    if shown_rot:
+        parts.append(f"the seed's rotation stands (the result turned {turn:.2f} deg from it, within "
+                     f"{SIGNIFICANT:g}x the {spread.deg:.2f} deg its independent estimates spread)")
+    if shown_t.any():
+        axes = ", ".join(a for a, k in zip("xyz", shown_t) if k)
+        cm = "/".join(f"{100 * d:.1f}" for d, k in zip(moved, shown_t) if k)
+        parts.append(f"the seed's translation along {axes} stands (the result moved {cm} cm, within "
+                     f"{SIGNIFICANT:g}x the {100 * spread.m:.1f} cm its independent estimates spread)")
+    out = Extrinsic(seed.rotvec if keep_rot else handed.rotvec, np.where(keep_t, seed.translation, handed.translation))
+    if (not keep_rot or (mine & ~keep_t).any()) and not all(  # some of the move remains: it alone must beat the seed
+            h.score(out, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides()):
+        parts.append("the rest of the move does not, alone, score above the seed on the data and both halves: "
+                     "the seed stands whole")
+        out, keep_rot, keep_t = seed, True, mine
+    return out, bool(keep_rot), "".join(a for a, k in zip("xyz", keep_t) if k), "; ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -292,7 +382,7 @@ def judge(
     final = stack.with_sigma(settings.sigma)
     steps.check()
     second = second_score(final)
-    checks = evidence(final, seed, res, settings, second, cancel, steps)
+    checks, spread = evidence(final, seed, res, settings, second, cancel, steps)
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
         steps.next("translation probes: the result moved 5 cm along x, y, z")
@@ -310,8 +400,15 @@ def judge(
         checks.append(rival)
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
+    sides = lambda: [final, *(final.select(m) for m in halves(final, seed))]  # noqa: E731 (the data and its halves)
+
+    def trusted(status: str, handed: Extrinsic, seed_axes: str, all_checks: tuple[Check, ...], spread: Spread) -> Verdict:
+        out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides)
+        return Verdict(status, out, False, reasons if status != "trusted" else (), all_checks,
+                       time.perf_counter() - t0, axes, seed_axes, spread, seed_rot, settled_axes, settled)
+
     if not failed:
-        return Verdict("trusted", res, False, (), tuple(checks), time.perf_counter() - t0, axes, "")
+        return trusted("trusted", res, "", tuple(checks), spread)
     if all(c.name.endswith("(translation)") for c in failed):
         # Only the translation is not pinned down (one or two scans of a street seldom pin it):
         # hand back the checked rotation with the seed's translation, if the scenes and both
@@ -320,13 +417,13 @@ def judge(
         # are the result's (the others the seed's); else all three are the seed's.
         agree = all(c.passed for c in checks if c.name in ("halves agree (translation)", "second start (translation)"))
         pinned = np.array([a.pinned for a in axes]) if agree and axes else np.zeros(3, dtype=bool)
-        sides = [final, *(final.select(m) for m in halves(final, seed))]
+        stacks = sides()
         for take in ([pinned, np.zeros(3, dtype=bool)] if pinned.any() else [pinned]):
             mixed = Extrinsic(res.rotvec, np.where(take, res.translation, seed.translation))
-            if all(h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides):
+            if np.array_equal(mixed.matrix, seed.matrix) or all(  # (the optimiser ended at the seed: nothing to prefer)
+                    h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in stacks):
                 kept = "".join(a for a, t in zip("xyz", take) if not t)
-                return Verdict("trusted-rotation", mixed, False, reasons, tuple(checks), time.perf_counter() - t0,
-                               axes, kept)
+                return trusted("trusted-rotation", mixed, kept, tuple(checks), spread)
     if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
             (rival is None or rival.passed):
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
@@ -338,16 +435,16 @@ def judge(
                        replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
                        cancel, steps.within)
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks = evidence(final, seed, refit, rotation, second, cancel, steps)
+        rot_checks, rot_spread = evidence(final, seed, refit, rotation, second, cancel, steps)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
-            return Verdict("trusted-rotation", refit, False, reasons, tuple(checks) + tuple(rot_checks),
-                           time.perf_counter() - t0, axes)
+            return trusted("trusted-rotation", refit, "xyz", tuple(checks) + tuple(rot_checks), rot_spread)
         reasons += tuple(f"with the seed's translation, {c.name}: {c.detail}" for c in rot_failed)
         checks += rot_checks
     steps.check()
     keep = on_untrusted == "keep-seed"
-    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes)
+    return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes,
+                   spread=spread)
 
 
 def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: str = "keep-seed") -> Verdict:
@@ -375,11 +472,11 @@ def evidence(
     second: tuple[str, Callable[[Extrinsic], float]],
     cancel: threading.Event | None = None,
     steps: _Steps | None = None,
-) -> list[Check]:
+) -> tuple[list[Check], Spread]:
     """The checks of ``res`` against ``seed`` on ``final`` (the stack at the final smoothing),
-    ``second`` being :func:`second_score` of it. With ``settings.rotation_only`` the
-    translation is the seed's and only the rotation is tested. ``steps``: progress and cancel
-    (:func:`evidence_steps` of them)."""
+    ``second`` being :func:`second_score` of it, and how far the independent estimates among
+    them landed from ``res``. With ``settings.rotation_only`` the translation is the seed's and
+    only the rotation is tested. ``steps``: progress and cancel (:func:`evidence_steps` of them)."""
     steps = steps or _Steps(evidence_steps(settings), cancel, None)
     rotation_only = settings.rotation_only
     tag = " (rotation only)" if rotation_only else ""
@@ -388,8 +485,12 @@ def evidence(
     limit_deg = min(max(AGREE_DEG, AGREE_FRACTION * seed.error_to(res)[0]), AGREE_MAX_DEG)
     checks: list[Check] = []
     steps.next("the scores at the seed and at the result")
+    # an optimiser that ends at the seed itself found nothing better: nothing to prefer (the
+    # checks of the peak below still decide whether the seed is one)
+    at_seed = bool(np.array_equal(res.matrix, seed.matrix))
     s_seed, s_res = final.score(seed, per_scene=False)[0], final.score(res, per_scene=False)[0]
-    checks.append(Check("score" + tag, s_res > s_seed, f"{final.objective_name} score {s_seed:.4f} -> {s_res:.4f}"))
+    checks.append(Check("score" + tag, s_res > s_seed or at_seed, f"{final.objective_name} score {s_seed:.4f} -> {s_res:.4f}"
+                        + (" (the optimiser ended at the seed)" if at_seed else "")))
 
     name, score2 = second
     steps.check()
@@ -401,6 +502,8 @@ def evidence(
     checks.append(significance_check(final, res, settings, tag))
 
     a, b = halves(final, seed)
+    rot_moved: list[float] = []
+    trans_moved: list[float] = []
     if a.sum() == 0 or b.sum() == 0:
         checks.append(Check("halves" + tag, False, "too few points to split into two halves"))
     else:
@@ -409,12 +512,12 @@ def evidence(
         last = settings.schedule(final.camera.width, final.camera.height)[-1]
         budget = None if last.max_points is None else last.max_points // 2  # half the points, half the budget
         local = replace(settings, stages=(replace(last, max_points=budget),), global_search=False)
-        better, detail, rot_moved, trans_moved = True, [], [], []
+        better, detail = True, []
         for i, mine in enumerate((a, b)):
             steps.next(f"half {i + 1} of 2: refined on its own")
             half = final.select(mine)
             h_seed, h_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
-            better &= h_res > h_seed
+            better &= h_res > h_seed or at_seed
             detail.append(f"{h_seed:.4f} -> {h_res:.4f}")
             deg, m = refine(half, res, local, cancel, steps.within).error_to(res)
             if not rotation_only:
@@ -450,4 +553,4 @@ def evidence(
         checks.append(Check("second start (translation)", m <= AGREE_M,
                             f"from a start mirrored through the result it ends {100 * m:.1f} cm away "
                             f"(limit {100 * AGREE_M:.0f})"))
-    return checks
+    return checks, Spread(max(rot_moved + [deg]), float("nan") if rotation_only else max(trans_moved + [m]))

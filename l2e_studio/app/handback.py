@@ -45,6 +45,11 @@ def what_is_handed_back(verdict: Any, judging_cancelled: bool = False, cancelled
         return ("the optimiser's best point so far (run cancelled, not judged)" if cancelled
                 else "the optimiser's answer (judging cancelled, not judged)" if judging_cancelled
                 else "the optimiser's answer (not judged)")
+    if verdict.seed_stands:
+        return f"the seed, confirmed: the optimiser's answer is within its own spread of it ({verdict.status})"
+    if verdict.settled:
+        return (f"the optimiser's answer with the seed's {' and '.join(verdict.from_seed())} "
+                f"(where it moved within its spread, or the scenes do not pin it; {verdict.status})")
     if verdict.status == "trusted":
         return "the optimiser's answer (trusted)"
     if verdict.status == "trusted-rotation":

@@ -94,6 +94,10 @@ def result_words(snap: Snapshot) -> str:
     v = snap.verdict
     if v is None:
         return "the optimiser's answer, not judged"
+    if v.seed_stands:
+        return "the seed, confirmed (what is handed back: the optimiser's answer is within its own spread of it)"
+    if v.settled:
+        return f"the optimiser's answer with the seed's {' and '.join(v.from_seed())} (what is handed back)"
     if v.status == "trusted":
         return "the optimiser's answer (trusted)"
     if v.status == "trusted-rotation":

@@ -139,6 +139,10 @@ def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
         return "yellow", "Accept best-so-far as seed (not judged)"
     if verdict is None:
         return "yellow", "Accept as seed (not judged)"
+    if verdict.seed_stands:
+        return "green", "Keep the seed (confirmed)"
+    if verdict.settled:
+        return "green", f"Accept (seed's {' and '.join(verdict.from_seed())} kept)"
     if verdict.status == "trusted":
         return "green", "Accept as seed"
     if verdict.status == "trusted-rotation" and verdict.seed_axes != "xyz":

@@ -1,0 +1,81 @@
+"""A trusted result is handed back only as far as it moved significantly (verdict.settle): where
+it turned or moved less than twice the spread of its independent estimates, the seed's stands."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
+from l2e_studio.geometry import Extrinsic
+from l2e_studio.verdict import SIGNIFICANT, Spread, Verdict, halves, judge, settle
+
+
+@pytest.fixture(scope="module")
+def stack(small_synth):
+    scenes, camera, truth = small_synth
+    return stack_scenes(scenes, camera, truth, CalibrationSettings()).with_sigma(CalibrationSettings().sigma), truth
+
+
+def sides_of(final, seed):
+    return lambda: [final, *(final.select(m) for m in halves(final, seed))]
+
+
+def test_a_move_beyond_the_spread_is_handed_back_whole(stack):
+    final, truth = stack
+    seed = truth.perturbed([0.03, -0.02, 0.03], np.radians([0.6, -0.5, 0.5]))
+    out, seed_rot, axes, note = settle(seed, truth, "", Spread(0.05, 0.003), sides_of(final, seed))
+    assert out is truth and not seed_rot and axes == "" and note == ""
+
+
+def test_a_turn_within_the_spread_keeps_the_seeds_rotation_and_the_significant_translation(stack):
+    final, truth = stack
+    # the seed's rotation is 1 deg off and its x 3 mm off; the spread is 0.05 deg / 5 mm: the turn
+    # is significant, the 3 mm along x is not (y and z did not move)
+    seed = truth.perturbed([0.003, 0.0, 0.0], np.radians([1.0, 0.0, 0.0]))
+    out, seed_rot, axes, note = settle(seed, truth, "", Spread(0.05, 0.005), sides_of(final, seed))
+    assert not seed_rot and np.allclose(out.rotvec, truth.rotvec)
+    assert out.translation[0] == seed.translation[0] and np.allclose(out.translation[1:], truth.translation[1:])
+    assert "x" in axes and "translation along x stands" in note and "0.3 cm" in note
+
+
+def test_a_significant_rest_that_does_not_beat_the_seed_leaves_the_seed_whole(stack):
+    final, truth = stack
+    # the seed is the truth; the "result" turned 0.1 deg (within 2 x 0.2) and moved 2 cm along x
+    # (beyond 2 x 2 mm): the 2 cm alone scores below the seed, so the seed stands whole
+    handed = truth.perturbed([0.02, 0.0, 0.0], np.radians([0.1, 0.0, 0.0]))
+    out, seed_rot, axes, note = settle(truth, handed, "", Spread(0.2, 0.002), sides_of(final, truth))
+    assert out is truth and seed_rot and set(axes) == set("xyz") and "stands whole" in note
+    v = Verdict("trusted", out, False, (), (), 0.0, (), "", Spread(0.2, 0.002), seed_rot, axes, note)
+    assert v.seed_stands and v.summary().startswith("the seed stands, confirmed")
+    assert v.to_dict()["within_spread"]["rotation_from_seed"] is True
+
+
+def test_the_unpinned_axes_are_no_part_of_the_settling(stack):
+    final, truth = stack
+    seed = truth.perturbed([0.0, 0.0, 0.004], np.radians([0.05, 0.0, 0.0]))
+    handed = Extrinsic(truth.rotvec, seed.translation)  # trusted-rotation: every axis the seed's
+    out, seed_rot, axes, note = settle(seed, handed, "xyz", Spread(0.1), sides_of(final, seed))
+    assert out.matrix.tolist() == seed.matrix.tolist() and seed_rot and axes == ""
+    v = Verdict("trusted-rotation", out, False, (), (), 0.0, (), "xyz", Spread(0.1), seed_rot, axes, note)
+    assert v.seed_stands and v.from_seed() == ["rotation", "translation"]
+    assert "do not pin its translation down" in v.summary()
+
+
+@pytest.mark.parametrize("nudge", [0.0, 1.0], ids=["at the truth", "a hair off"])
+def test_judged_from_the_truth_the_seed_stands(small_synth, nudge):
+    """Started at the truth (or 1 mrad / 2 mm off it), the optimiser ends at the seed or moves
+    by about its own scatter: the verdict confirms the seed instead of handing back the scatter."""
+    scenes, camera, truth = small_synth
+    settings = CalibrationSettings()
+    seed = truth.perturbed([0.002 * nudge, 0, 0], [0.001 * nudge, 0, 0])
+    st = stack_scenes(scenes, camera, seed, settings)
+    result = calibrate(st, None, seed, settings)
+    v = judge(st, result, settings)
+    assert v.trusted and v.seed_stands, v.lines()
+    assert v.extrinsic.matrix.tolist() == seed.matrix.tolist()
+    assert v.summary().startswith("the seed stands, confirmed")
+    turn = seed.error_to(Extrinsic(result.extrinsic.rotvec, seed.translation))[0]
+    assert turn <= SIGNIFICANT * v.spread.deg
+    if nudge == 0.0:
+        assert "ended at the seed" in v.settled
