@@ -4,9 +4,12 @@
 :class:`l2e_studio.verdict.Verdict` every method gets. ``trusted`` only when all hold:
 
 * **residuals consistent with the sensors' noise**: the board points' RMS distance to the
-  camera's planes and the edge points' RMS distance to the outline are within what lidar range
-  noise and the board's per-frame camera error explain (``NOISE_PLANE_M``, ``NOISE_EDGE_M``),
-  and the corners reproject within ``NOISE_REPROJECTION_PX``;
+  camera's planes is within what the error model of the solve explains: the lidar's own scatter
+  on each board (measured: its points about their own plane) and a per-frame offset of the whole
+  board of ``FRAME_PLANE_M`` (the camera's depth of a board, the board's motion between image and
+  scan), at the 99 % chi-square bound for the number of frames used (a few frames can sit further
+  off by chance than many); the edge points' RMS distance to the outline within ``NOISE_EDGE_M``;
+  the corners reproject within ``NOISE_REPROJECTION_PX``;
 * **leave-one-frame-out stability**: no single frame moves the result by more than
   ``LOO_M`` / ``LOO_DEG`` when it alone is left out;
 * **uncertainty within the limits**: on every axis the 95 % bound on the error (the reported
@@ -37,9 +40,9 @@ from .errors import InputError
 from .geometry import Extrinsic
 from .scenes import Scene
 from .target import Board, Detection, TargetSettings, calibrate_target
+from .target.solve import FRAME_PLANE_M
 from .verdict import ON_UNTRUSTED, Check, Verdict, with_check
 
-NOISE_PLANE_M = 0.03  # RMS point-to-plane: VLP-16 range noise (~1-2 cm) + the camera's board depth error
 NOISE_EDGE_M = 0.03  # RMS edge-to-outline: azimuth step, beam width, mixed returns
 NOISE_REPROJECTION_PX = 1.0  # RMS corner reprojection (px)
 LOO_M, LOO_DEG = 0.01, 0.2  # the most one frame may move the result
@@ -50,6 +53,7 @@ BOARD_CHECK_DEG, BOARD_CHECK_M = 0.5, 0.03  # the least disagreement with the bo
 BOARD_SIGMAS = 3.76  # sqrt of the chi-square(3 dof) 99.7 % quantile: a disagreement past it is not the boards' noise
 BOARDS_ALONE = TargetSettings(leave_one_out=False)  # the target method as evidence: no leave-one-out needed
 BOARD_LOOSE_DEG = 3.0  # boards whose own rotation is looser (3 sigma, about every axis) than this cannot tell
+NOISE_QUANTILE = 0.99  # the residuals' bound under the error model: their chi-square quantile
 
 
 class TargetVerdict(Verdict):
@@ -74,12 +78,15 @@ def judge_target(result: CalibrationResult, on_untrusted: str = "keep-seed") -> 
     checks = [Check("frames used", len(used) >= MIN_USED,
                     f"{len(used)} of {len(detail.frames)} frames used (at least {MIN_USED})")]
     plane, edge = detail.plane_rms_m(), detail.edge_rms_m()
+    plane_limit, scatter = plane_bound(used)
     reps = [f.detection.reprojection_px for f in used]
     rep = float(np.sqrt(np.mean(np.square(reps)))) if reps else float("nan")
     rep_limit = NOISE_REPROJECTION_PX
-    ok = bool(plane <= NOISE_PLANE_M and (not np.isfinite(edge) or edge <= NOISE_EDGE_M) and rep <= rep_limit)
+    ok = bool(plane <= plane_limit and (not np.isfinite(edge) or edge <= NOISE_EDGE_M) and rep <= rep_limit)
     checks.append(Check("residuals within sensor noise", ok,
-                        f"board points {100 * plane:.1f} cm RMS off the camera's planes (limit {100 * NOISE_PLANE_M:.0f}), "
+                        f"board points {100 * plane:.1f} cm RMS off the camera's planes (limit {100 * plane_limit:.1f}: "
+                        f"the lidar's {100 * scatter:.1f} cm scatter on the boards and {100 * FRAME_PLANE_M:.0f} cm per board "
+                        f"over {len(used)} frames, {100 * NOISE_QUANTILE:.0f} % bound), "
                         f"edge points {100 * edge:.1f} cm off the outline (limit {100 * NOISE_EDGE_M:.0f}), "
                         f"corners reproject {rep:.2f} px RMS (limit {rep_limit:.1f})"))
     loo = [(f.loo_m, f.loo_deg, f.name) for f in used if np.isfinite(f.loo_m)]
@@ -106,6 +113,22 @@ def judge_target(result: CalibrationResult, on_untrusted: str = "keep-seed") -> 
     keep = on_untrusted == "keep-seed"
     return TargetVerdict("not-trusted", result.seed if keep else result.extrinsic, keep, reasons, tuple(checks),
                          time.perf_counter() - t0)
+
+
+def plane_bound(used) -> tuple[float, float]:
+    """(the most the used frames' board points may lie RMS off the camera's planes, the lidar's
+    own RMS scatter on those boards), both in m. Under the solve's error model a frame's points
+    are off by the lidar's scatter about the board (each frame's, measured) plus one offset of
+    the whole board with standard deviation ``FRAME_PLANE_M``; the offsets' mean square over n
+    frames is bounded by the chi-square quantile over n."""
+    from scipy.stats import chi2
+
+    n_pts = np.array([f.lidar.n_points for f in used], float)
+    if not len(used) or n_pts.sum() == 0:
+        return float("nan"), float("nan")
+    scatter = float(np.sqrt(np.sum(n_pts * np.square([f.lidar.rms_m for f in used])) / n_pts.sum()))
+    n = len(used)
+    return float(np.sqrt(FRAME_PLANE_M**2 * chi2.ppf(NOISE_QUANTILE, n) / n + scatter**2)), scatter
 
 
 def uncertainty_check(sigma_m: np.ndarray, sigma_deg: np.ndarray, n_frames: int) -> Check:
