@@ -196,3 +196,32 @@ def test_cancel_while_judging_is_not_judged_yellow_and_saved_as_such(page, app, 
     doc = yaml.safe_load(saved[0].read_text())
     assert doc["verdict"]["status"] == "not judged" and doc["verdict"]["cancelled"] is True
     assert doc["cancelled"] is True and doc["optimiser"]["cancelled"] is False
+
+
+def test_a_seed_at_the_peak_is_confirmed_not_nudged(page, app):
+    """QA of a calibration that is already right: started at the true extrinsic, the run's
+    verdict (the real one) hands back the seed itself and the page says the seed stands; Accept
+    becomes "Keep the seed", and the saved file carries the spread it was judged against."""
+    from l2e_studio.io.cameras import load_seed
+
+    seed = load_seed(app.scene_set.root / "truth.yaml")  # (the folder's own seed is 2 deg / 5 cm off)
+    app.set_extrinsic(seed, "typed")
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    wait_for(lambda: app.result_scores is not None, what="the result's answers scored")
+    v = app.state.snapshot().verdict
+    assert v.seed_stands, v.lines()
+    assert np.array_equal(v.extrinsic.matrix, seed.matrix)
+    open_tab(page, "Result")
+    page.get_by_text("the seed stands, confirmed").first.wait_for()
+    keep = page.get_by_role("button", name="Keep the seed (confirmed)")
+    assert keep.is_visible()
+    page.get_by_text("Handed back (Accept, Save, exports): the seed, confirmed").first.wait_for()
+    shot(page, "result_seed_confirmed")
+    keep.click()
+    wait_for(lambda: np.array_equal(app.state.snapshot().extrinsic.matrix, seed.matrix), what="the seed kept")
+    path, _ = app.save_result()
+    doc = yaml.safe_load(path.read_text())
+    assert doc["verdict"]["within_spread"]["rotation_from_seed"] is True
+    assert doc["verdict"]["spread"]["rotation_deg"] > 0

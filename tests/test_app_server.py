@@ -230,6 +230,10 @@ def test_the_verdict_is_shown_beside_the_result_and_saved(app):
                 f"Accept (seed's translation kept along {', '.join(v.seed_axes)})")
     expected = {"trusted": "Accept as seed", "trusted-rotation": rotation,
                 "not-trusted": "Accept anyway (not trusted)"}[v.status]
+    if v.seed_stands:  # every part moved within its spread: nothing to accept but the seed itself
+        expected = "Keep the seed (confirmed)"
+    elif v.settled:  # some part did: the label names what of the seed is kept
+        expected = f"Accept (seed's {' and '.join(v.from_seed())} kept)"
     assert app.results.accept.label == expected
     path, _ = app.save_result()
     doc = yaml.safe_load(path.read_text())
