@@ -97,3 +97,21 @@ def test_export_cli_prints_the_status_and_require_trusted_refuses(tmp_path, caps
     ok, _ = write_result(tmp_path / "ok.yaml", res, CAM, verdict=trusted)
     assert cli_main(["export", str(ok), "--require-trusted", "--format", "matrix", "--out", str(tmp_path / "m.txt")]) == 0
     assert "# status: trusted (trusted:" in (tmp_path / "m.txt").read_text()
+
+
+@pytest.mark.parametrize("fmt", ["ros2", "urdf", "kalibr", "json"])
+def test_a_confirmed_seed_says_so_in_every_export(fmt):
+    """A trusted verdict whose result moved within its spread hands back the seed: each export
+    says the seed's values stand and why, and reads back as the seed."""
+    from l2e_studio.verdict import Spread
+
+    res = fake_result()
+    note = "the seed's rotation stands (the result turned 0.05 deg from it, within 2x the 0.10 deg its independent estimates spread)"
+    v = Verdict("trusted", res.seed, False, (), (), 1.0, (), "", Spread(0.1, 0.004), True, "xyz", note)
+    doc = result_to_dict(res, CAM, verdict=v)
+    assert doc["verdict"]["spread"] == {"rotation_deg": 0.1, "translation_m": 0.004}
+    text = export_text(v.extrinsic, fmt, result=doc)
+    said = " ".join(json.loads(text)["status_notes"]) if fmt == "json" else " ".join(comment_lines(text, fmt))
+    assert "the seed stands, confirmed" in said and "SEED's values stand" in said and "0.05 deg" in said
+    if fmt == "urdf":
+        ET.fromstring(f"<robot>{text}</robot>")
