@@ -32,6 +32,18 @@ def test_verdict_is_a_headline_in_words_with_a_table_of_checks():
     assert "class='bad'" in verdict_html({"status": "not-trusted", "kept_seed": True, "reasons": ["x"]})
 
 
+def test_a_confirmed_seed_is_the_headline():
+    v = {"status": "trusted", "kept_seed": False, "reasons": [],
+         "summary": "the seed stands, confirmed: the seed's rotation stands (the result turned 0.05 deg from it, "
+                    "within 2x the 0.13 deg its independent estimates spread)",
+         "within_spread": {"rotation_from_seed": True, "translation_from_seed": ["x", "y", "z"],
+                           "note": "the seed's rotation stands (the result turned 0.05 deg from it)"},
+         "spread": {"rotation_deg": 0.13, "translation_m": 0.007}, "checks": {"score": {"passed": True, "detail": "up"}}}
+    page = verdict_html(v)
+    assert "SEED CONFIRMED" in page and "class='ok'" in page
+    assert "SEED&#x27;s values stand" in page and "0.05 deg" in page
+
+
 def test_a_second_bump_on_a_sweep_is_told_apart_from_the_single_peak_check():
     offs = np.linspace(-0.05, 0.05, 21)
     vals = np.exp(-(offs / 0.01) ** 2) + 0.96 * np.exp(-((offs - 0.04) / 0.005) ** 2)  # a side bump at +4 cm

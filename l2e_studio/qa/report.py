@@ -200,6 +200,7 @@ VERDICT_HEADLINES = {
     "not judged": "NOT JUDGED: nothing checked this result",
     "no verdict": "NO VERDICT",
 }
+SEED_CONFIRMED = "SEED CONFIRMED: the result lies within its own spread of the seed, which is handed back"
 
 
 def score_name(objective: str) -> str:
@@ -224,6 +225,8 @@ def verdict_html(v) -> str:
     """The verdict as a headline in words, its reasons, and its checks as a table (no raw dump)."""
     status, lines = export_status({"verdict": v} if isinstance(v, dict) else {})
     head = VERDICT_HEADLINES.get(status, status.upper())
+    if isinstance(v, dict) and str(v.get("summary", "")).startswith("the seed stands"):
+        head = SEED_CONFIRMED  # trusted, and every part of the result within its spread of the seed
     out = [f"<div class='{VERDICT_CLASS.get(status, 'warn')}'><b>{_e(head)}</b>"
            + (f"<br>{_e(v['summary'])}" if isinstance(v, dict) and v.get("summary") else "") + "</div>"]
     out += [f"<p>{_e(line)}</p>" for line in lines[1:]]
