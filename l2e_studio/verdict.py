@@ -456,7 +456,8 @@ def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: st
         return replace(verdict, checks=checks)
     keep = on_untrusted == "keep-seed"
     return replace(verdict, status="not-trusted", extrinsic=seed if keep else verdict.extrinsic, kept_seed=keep,
-                   reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz")
+                   reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz",
+                   seed_rotation=False, settled_axes="", settled="")
 
 
 def evidence_steps(settings: CalibrationSettings) -> int:

@@ -79,3 +79,17 @@ def test_judged_from_the_truth_the_seed_stands(small_synth, nudge):
     assert turn <= SIGNIFICANT * v.spread.deg
     if nudge == 0.0:
         assert "ended at the seed" in v.settled
+
+
+def test_outside_evidence_that_fails_clears_what_stood(stack):
+    """A trusted verdict with a settled part, failed by the boards: not trusted, the seed handed
+    back, and nothing in its summary or file about a seed that stood within a spread."""
+    from l2e_studio.verdict import with_check
+    from l2e_studio.verdict_check import Check
+
+    final, truth = stack
+    v = Verdict("trusted", truth, False, (), (), 0.0, (), "", Spread(0.2, 0.002), True, "xyz", "the seed's rotation stands")
+    seed = truth.perturbed([0.05, 0, 0], [0.01, 0, 0])
+    out = with_check(v, Check("boards agree", False, "2.0 deg apart"), seed)
+    assert out.status == "not-trusted" and out.extrinsic is seed and not out.seed_stands
+    assert "stands" not in out.summary() and "within_spread" not in out.to_dict()
