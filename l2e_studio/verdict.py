@@ -130,11 +130,14 @@ class Verdict:
     def _summary(self) -> str:
         if self.status == "trusted":
             return "trusted: both halves of the data, a second start and an independent score agree with the result"
-        if self.status == "trusted-rotation" and self.seed_axes != "xyz":
-            taken = ", ".join(a for a in "xyz" if a not in self.seed_axes)
+        taken = ", ".join(a for a in "xyz" if a not in self.seed_axes + self.settled_axes)  # the result's
+        if self.status == "trusted-rotation" and taken:
             kept = ", ".join(self.seed_axes)
             return (f"rotation and the translation along {taken} trusted; along {kept} the translation is not "
                     f"pinned down by these scenes, the seed's is kept")
+        if self.status == "trusted-rotation" and self.seed_axes != "xyz":
+            return (f"rotation trusted; along {', '.join(self.seed_axes)} the translation is not pinned down by "
+                    f"these scenes, the seed's is kept")
         if self.status == "trusted-rotation":
             return "rotation trusted; the translation is not pinned down by these scenes, the seed's translation is kept"
         return "not trusted: " + ("the seed is kept" if self.kept_seed else "the result is kept, marked not trusted")

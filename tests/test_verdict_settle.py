@@ -93,3 +93,17 @@ def test_outside_evidence_that_fails_clears_what_stood(stack):
     out = with_check(v, Check("boards agree", False, "2.0 deg apart"), seed)
     assert out.status == "not-trusted" and out.extrinsic is seed and not out.seed_stands
     assert "stands" not in out.summary() and "within_spread" not in out.to_dict()
+
+
+def test_a_settled_axis_is_not_called_trusted_in_the_summary():
+    """trusted-rotation, z unpinned (the seed's), x within its spread (the seed's), y the result's:
+    the summary names y alone as trusted, z as unpinned, and x as standing."""
+    note = "the seed's translation along x stands (the result moved 0.4 cm, within 2x the 0.8 cm its independent estimates spread)"
+    v = Verdict("trusted-rotation", Extrinsic(np.zeros(3), np.zeros(3)), False, (), (), 0.0, (), "z",
+                Spread(0.1, 0.008), False, "x", note)
+    line = v.summary()
+    assert line.startswith("rotation and the translation along y trusted; along z the translation is not pinned")
+    assert line.endswith(note) and v.from_seed() == ["translation along x, z"]
+    both = Verdict("trusted-rotation", Extrinsic(np.zeros(3), np.zeros(3)), False, (), (), 0.0, (), "z",
+                   Spread(0.1, 0.008), False, "xy", note)
+    assert both.summary().startswith("rotation trusted; along z the translation is not pinned down")
