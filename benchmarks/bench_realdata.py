@@ -82,14 +82,13 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
                 se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
                 unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if variant == "new" else []
                 spread = getattr(v, "spread", None) if variant == "new" else None
+                oe, move = result.extrinsic.error_to(rig.reference), seed.error_to(result.extrinsic)
                 rows.append(dict(rig=rig.name, variant=variant, unpinned="".join(unpinned), level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
                                  end_deg=ee[0], end_m=ee[1], cls=classify(se, ee), status=status, seconds=seconds,
-                                 opt_deg=result.extrinsic.error_to(rig.reference)[0], opt_m=result.extrinsic.error_to(rig.reference)[1],
-                                 move_deg=seed.error_to(result.extrinsic)[0], move_m=seed.error_to(result.extrinsic)[1],
+                                 opt_deg=oe[0], opt_m=oe[1], move_deg=move[0], move_m=move[1],
                                  spread_deg=None if spread is None else spread.deg,
                                  spread_m=None if spread is None or np.isnan(spread.m) else spread.m,
                                  settled=getattr(v, "settled", "") if variant == "new" else ""))
-                oe = result.extrinsic.error_to(rig.reference)
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
                       f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "
                       f"(optimiser {oe[0]:.2f}/{100 * oe[1]:.1f})", flush=True)

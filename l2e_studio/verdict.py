@@ -40,6 +40,7 @@ the verdict says so. A seed already at the peak is confirmed, not nudged by the 
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -169,6 +170,7 @@ class Verdict:
             **({"within_spread": {"rotation_from_seed": self.seed_rotation, "translation_from_seed": list(self.settled_axes),
                                   "note": self.settled}} if self.settled else {}),
             **({"spread": self.spread.to_dict()} if self.spread is not None else {}),
+            **({"seed_stands": True} if self.seed_stands else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
@@ -403,7 +405,7 @@ def judge(
         checks.append(rival)
     failed = [c for c in checks if not c.passed]
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
-    sides = lambda: [final, *(final.select(m) for m in halves(final, seed))]  # noqa: E731 (the data and its halves)
+    sides = functools.cache(lambda: [final, *(final.select(m) for m in halves(final, seed))])  # the data, its halves: once
 
     def trusted(status: str, handed: Extrinsic, seed_axes: str, all_checks: tuple[Check, ...], spread: Spread) -> Verdict:
         out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides)

@@ -38,7 +38,8 @@ def test_a_confirmed_seed_is_the_headline():
                     "within 2x the 0.13 deg its independent estimates spread)",
          "within_spread": {"rotation_from_seed": True, "translation_from_seed": ["x", "y", "z"],
                            "note": "the seed's rotation stands (the result turned 0.05 deg from it)"},
-         "spread": {"rotation_deg": 0.13, "translation_m": 0.007}, "checks": {"score": {"passed": True, "detail": "up"}}}
+         "spread": {"rotation_deg": 0.13, "translation_m": 0.007}, "seed_stands": True,
+         "checks": {"score": {"passed": True, "detail": "up"}}}
     page = verdict_html(v)
     assert "SEED CONFIRMED" in page and "class='ok'" in page
     assert "SEED&#x27;s values stand" in page and "0.05 deg" in page

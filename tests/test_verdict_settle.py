@@ -48,7 +48,7 @@ def test_a_significant_rest_that_does_not_beat_the_seed_leaves_the_seed_whole(st
     assert out is truth and seed_rot and set(axes) == set("xyz") and "stands whole" in note
     v = Verdict("trusted", out, False, (), (), 0.0, (), "", Spread(0.2, 0.002), seed_rot, axes, note)
     assert v.seed_stands and v.summary().startswith("the seed stands, confirmed")
-    assert v.to_dict()["within_spread"]["rotation_from_seed"] is True
+    assert v.to_dict()["within_spread"]["rotation_from_seed"] is True and v.to_dict()["seed_stands"] is True
 
 
 def test_the_unpinned_axes_are_no_part_of_the_settling(stack):

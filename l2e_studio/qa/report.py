@@ -225,7 +225,7 @@ def verdict_html(v) -> str:
     """The verdict as a headline in words, its reasons, and its checks as a table (no raw dump)."""
     status, lines = export_status({"verdict": v} if isinstance(v, dict) else {})
     head = VERDICT_HEADLINES.get(status, status.upper())
-    if isinstance(v, dict) and str(v.get("summary", "")).startswith("the seed stands"):
+    if isinstance(v, dict) and v.get("seed_stands") is True:
         head = SEED_CONFIRMED  # trusted, and every part of the result within its spread of the seed
     out = [f"<div class='{VERDICT_CLASS.get(status, 'warn')}'><b>{_e(head)}</b>"
            + (f"<br>{_e(v['summary'])}" if isinstance(v, dict) and v.get("summary") else "") + "</div>"]
