@@ -8,7 +8,8 @@ Three kinds of damage (all deterministic for a given seed):
   a negative size, a sensor larger than any...), given per format.
 
 A case passes when the reader returns a result its ``check`` accepts or raises
-:class:`~l2e_studio.errors.InputError`; anything else (another exception type, a result that
+:class:`~l2e_studio.errors.InputError`; anything else (another exception type, a NumPy
+RuntimeWarning such as an overflow or an invalid cast, a result that
 breaks the reader's promises, a memory peak beyond the file's size) is a finding.
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import time
 import tracemalloc
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -85,7 +87,9 @@ def run_target(target: Target, folder: Path, seed: int = 0) -> Report:
         _write(path, data)
         tracemalloc.start()
         try:
-            result = target.load(path)
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", RuntimeWarning)  # an overflow or a NaN cast is a finding too
+                result = target.load(path)
             target.check(result)
             report.loaded += 1
         except InputError as exc:

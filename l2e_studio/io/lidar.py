@@ -58,6 +58,8 @@ LIDAR_SUFFIXES: tuple[str, ...] = (".txt", ".csv", ".xyz", ".pcd", ".ply", ".pcd
 
 #: Field names recognised as the laser ring (beam) number, in order of preference.
 RING_NAMES: tuple[str, ...] = ("ring", "laser_id", "ring_id", "channel")
+#: The largest ring index read (lidars have up to a few hundred beams); a larger one is no ring.
+MAX_RING = 4096
 
 #: Field names recognised as intensity, in order of preference.
 INTENSITY_NAMES: tuple[str, ...] = ("intensity", "reflectivity", "reflectance", "i", "signal", "remission", "scalar_intensity")
@@ -173,8 +175,10 @@ def _finish(path: Path, fields: dict[str, np.ndarray], intensity_field: str | No
     ring = None
     if ring_key is not None:
         values = np.asarray(fields[ring_key], dtype=np.float64).reshape(-1)
-        if values.shape[0] == xyz.shape[0] and np.all(np.isfinite(values[ok])):
-            ring = values[ok].astype(np.int32)
+        kept = values[ok] if values.shape[0] == xyz.shape[0] else None
+        # a ring index is a small count (a beam number); anything else is not a ring field we can use
+        if kept is not None and np.all(np.isfinite(kept)) and np.all((kept >= 0) & (kept <= MAX_RING)):
+            ring = kept.astype(np.int32)
     return LidarScan(
         points=xyz[ok].astype(np.float32),
         intensity=scale_intensity(raw[ok]),
