@@ -25,6 +25,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 W, H = 1280, 720
+#: EventPacket sizes measured for EVT 3.0: a small packet (16 KiB, ~1 ms of a quiet scene) and 1 MiB.
+PACKET_BYTES = (16 * 1024, 1024 * 1024)
 
 
 def generate(path: Path, n: int, fmt: str, block: int = 2_000_000) -> None:
@@ -75,11 +77,16 @@ def measure(path: str, what: str) -> None:
     # numba's kernels loaded from its cache (or compiled) before the clock starts
     list(event_codecs.Evt3Decoder().decode(np.zeros(4, np.uint16)))
     list(event_codecs.Evt2Decoder().decode(np.zeros(4, np.uint32)))
+    readonly = np.zeros(4, np.uint16)
+    readonly.flags.writeable = False  # packets are read-only views of the message (another specialisation)
+    list(event_codecs.Evt3Decoder().decode(readonly))
     header = pr.read_header(Path(path)) if path.endswith(".raw") else None
     n = 0
     wall, cpu = time.perf_counter(), time.process_time()
     if what == "accumulate":
         n = int(accumulate_events(path, window_s=1e9, clip=None).sum())
+    elif what.startswith("packets"):
+        n = _decode_as_packets(Path(path), header.data_offset, int(what.split(":")[1]))
     else:
         if what == "before":
             decode = ref.decode_evt3 if header.encoding == "evt3" else ref.decode_evt2
@@ -91,6 +98,25 @@ def measure(path: str, what: str) -> None:
             n += x.size
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     print(json.dumps({"seconds": wall, "cpu_seconds": cpu, "events": n, "peak_rss_mb": _peak_rss_mb()}))
+
+
+def _decode_as_packets(path: Path, offset: int, packet_bytes: int) -> int:
+    """The file's EVT 3.0 words cut into ``event_camera_msgs/EventPacket``s of ``packet_bytes``
+    each (metavision_driver publishes the SDK's buffers as they come, cut anywhere) and decoded by
+    the bag readers' own :class:`PacketStream`, one packet in memory at a time."""
+    from types import SimpleNamespace
+
+    from l2e_studio.io.event_packets import PacketStream
+
+    stream = PacketStream("/bench/events")
+    n = 0
+    with open(path, "rb") as f:
+        f.seek(offset)
+        while payload := f.read(packet_bytes):  # a fresh buffer a message, as a bag reader hands them out
+            msg = SimpleNamespace(encoding="evt3", is_bigendian=False, time_base=0,
+                                  events=np.frombuffer(payload, np.uint8))
+            n += stream.decode(msg)[0].size
+    return n
 
 
 def _peak_rss_mb() -> float:
@@ -125,7 +151,7 @@ def main() -> None:
                     "list(c.Evt3Decoder().decode(np.zeros(4, np.uint16))); list(c.Evt2Decoder().decode(np.zeros(4, np.uint32)))"],
                    check=True)
     fmts = ("evt3", "evt2", "h5") if args.format == "all" else (args.format,)
-    print(f"{'format':6s} {'what':10s} {'events':>11s} {'file MB':>8s} {'wall s':>7s} {'Mev/s':>7s} "
+    print(f"{'format':6s} {'what':16s} {'events':>11s} {'file MB':>8s} {'wall s':>7s} {'Mev/s':>7s} "
           f"{'cpu s':>7s} {'Mev/s cpu':>9s} {'peak RSS MB':>11s}", flush=True)
     with tempfile.TemporaryDirectory(prefix="bench_accumulate_") as tmp:
         for fmt in fmts:
@@ -133,11 +159,12 @@ def main() -> None:
                 path = Path(tmp) / f"bench_{n}.{'raw' if fmt != 'h5' else 'h5'}"
                 generate(path, n, fmt)
                 whats = [] if fmt == "h5" else (["before", "after"] if n == int(args.events) else ["after"])
+                whats += [f"packets:{b}" for b in PACKET_BYTES] if fmt == "evt3" else []
                 whats += [] if args.no_accumulate else ["accumulate"]
                 for what in whats:
                     r = _child(path, what)
                     assert r["events"] == n, (r, n)
-                    print(f"{fmt:6s} {what:10s} {n:11d} {path.stat().st_size / 1e6:8.1f} {r['seconds']:7.2f} "
+                    print(f"{fmt:6s} {what:16s} {n:11d} {path.stat().st_size / 1e6:8.1f} {r['seconds']:7.2f} "
                           f"{n / r['seconds'] / 1e6:7.1f} {r['cpu_seconds']:7.2f} {n / r['cpu_seconds'] / 1e6:9.1f} "
                           f"{r['peak_rss_mb']:11.0f}", flush=True)
                 path.unlink()
