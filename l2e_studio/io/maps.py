@@ -19,8 +19,6 @@ unsmoothed: :func:`l2e_studio.objective.prepare_map` does that.
 
 from __future__ import annotations
 
-import contextlib
-import threading
 from pathlib import Path
 
 import cv2
@@ -178,31 +176,6 @@ def png_size(data: bytes) -> tuple[int, int] | None:
     return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
 
 
-_QUIET_LOCK = threading.Lock()
-_quiet_depth = 0
-_loud_level: int | None = None
-
-
-@contextlib.contextmanager
-def _quiet_decoders():
-    """OpenCV's image decoders log their own complaints about a damaged file (libtiff's "Seek error
-    accessing TIFF directory" ...) to the terminal; we say what is wrong in one line instead. The
-    log level is process-wide, so decodes in other threads share one silent spell."""
-    global _quiet_depth, _loud_level
-    with _QUIET_LOCK:
-        if _quiet_depth == 0:
-            _loud_level = cv2.utils.logging.getLogLevel()
-            cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-        _quiet_depth += 1
-    try:
-        yield
-    finally:
-        with _QUIET_LOCK:
-            _quiet_depth -= 1
-            if _quiet_depth == 0 and _loud_level is not None:
-                cv2.utils.logging.setLogLevel(_loud_level)
-
-
 def _read_image(path: Path, width: int | None = None, height: int | None = None) -> tuple[np.ndarray, int]:
     data = np.fromfile(path, dtype=np.uint8)
     if data.size == 0:
@@ -213,8 +186,7 @@ def _read_image(path: Path, width: int | None = None, height: int | None = None)
         if not (0 < w <= MAX_IMAGE_SIDE and 0 < h <= MAX_IMAGE_SIDE):
             raise InputError(path, f"the PNG declares {w}x{h} pixels; at most {MAX_IMAGE_SIDE} a side are read")
         _check_dims(path, w, h, width, height)
-    with _quiet_decoders():
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputError(path, "cannot decode the image (corrupt, truncated or not an image)")
     if image.size == 0:
