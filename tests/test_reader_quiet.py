@@ -15,9 +15,8 @@ from l2e_studio.io.lidar import load_lidar
 
 
 def _pcd_scan(path: Path, ring: np.ndarray) -> Path:
-    rng = np.random.default_rng(3)
-    xyz = rng.uniform(-20, 20, (len(ring), 3))
     n = len(ring)
+    xyz = np.random.default_rng(3).uniform(-20, 20, (n, 3))
     header = (f"VERSION 0.7\nFIELDS x y z intensity ring\nSIZE 4 4 4 4 4\nTYPE F F F F F\nCOUNT 1 1 1 1 1\n"
               f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA ascii\n")
     rows = [f"{x:.3f} {y:.3f} {z:.3f} {i} {float(r)!r}" for (x, y, z), i, r in zip(xyz, range(n), ring)]
@@ -25,7 +24,7 @@ def _pcd_scan(path: Path, ring: np.ndarray) -> Path:
     return path
 
 
-@pytest.mark.parametrize("bad", [1e30, -3.0, 2.5e9])
+@pytest.mark.parametrize("bad", [1e30, -3.0, 2.5e9, float("nan"), float("inf")])
 def test_a_ring_field_out_of_any_lidars_range_is_not_used_and_warns_nothing(tmp_path: Path, bad: float) -> None:
     ring = np.arange(40, dtype=np.float64) % 16
     good = load_lidar(_pcd_scan(tmp_path / "good.pcd", ring))

@@ -175,10 +175,10 @@ def _finish(path: Path, fields: dict[str, np.ndarray], intensity_field: str | No
     ring = None
     if ring_key is not None:
         values = np.asarray(fields[ring_key], dtype=np.float64).reshape(-1)
-        kept = values[ok] if values.shape[0] == xyz.shape[0] else None
-        # a ring index is a small count (a beam number); anything else is not a ring field we can use
-        if kept is not None and np.all(np.isfinite(kept)) and np.all((kept >= 0) & (kept <= MAX_RING)):
-            ring = kept.astype(np.int32)
+        # a ring index is a beam number, 0..MAX_RING; anything else (NaN, inf, 1e30, negative) is not
+        # a ring field we can use
+        if values.shape[0] == xyz.shape[0] and np.all((values[ok] >= 0) & (values[ok] <= MAX_RING)):
+            ring = values[ok].astype(np.int32)
     return LidarScan(
         points=xyz[ok].astype(np.float32),
         intensity=scale_intensity(raw[ok]),
