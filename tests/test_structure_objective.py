@@ -192,7 +192,7 @@ def test_a_rival_peak_nearly_as_high_makes_the_answer_ambiguous():
     from dataclasses import replace as dc_replace
 
     from l2e_studio.calibrate import CalibrationResult
-    from l2e_studio.peaks import RIVAL_DEG, rival_check
+    from l2e_studio.peaks import RIVAL_CLIMBS, RIVAL_DEG, rival_check
 
     res = Extrinsic(np.zeros(3), np.zeros(3))
     far = Extrinsic(np.radians([0.0, 0.0, 2.5 * RIVAL_DEG]), np.zeros(3))
@@ -211,6 +211,15 @@ def test_a_rival_peak_nearly_as_high_makes_the_answer_ambiguous():
     # an end of a climb from around the result counts like a start's, and a higher one is named
     climbed = rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6))), climbs=((second, 1.1),))
     assert not climbed.passed and "a higher peak the search missed" in climbed.detail
+    # beyond the first RIVAL_CLIMBS climbs only a higher end counts: many climbs on a rugged
+    # landscape find some end nearly as high, a higher one is a peak the search missed
+    lower = (far, 0.5)
+    late = (lower,) * RIVAL_CLIMBS
+    assert rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6))), climbs=late + ((second, 0.9),)).passed
+    assert not rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6))),
+                           climbs=late[:RIVAL_CLIMBS - 1] + ((second, 0.9),)).passed
+    beaten = rival_check(dc_replace(base, ends=((res, 1.0), (far, 0.6))), climbs=late + ((near, 1.2), (second, 1.05)))
+    assert not beaten.passed and "105 %" in beaten.detail  # (the near one is the result's own peak)
 
 
 def test_translation_axes_name_what_to_record() -> None:
