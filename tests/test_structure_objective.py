@@ -142,7 +142,9 @@ def test_a_side_peak_the_search_settled_on_meets_the_peak_it_missed() -> None:
     """KITTI 000008 from a seed 5 deg / 20 cm off: every start of the global search ends on
     side peaks, the best 4.6 deg from the reference with 72 % of the reference peak's score, and
     the verdict's other checks all pass there. Climbs from the far field around the result
-    reach the missed peak's side: the verdict does not trust it, and says why."""
+    reach the missed peak's side: the verdict does not trust it, and says why. (With OpenCV 5.1's
+    last-bit rounding the three best climbs end below 80 % of the result: a later one finds an
+    end above it; the test holds on 5.0 and 5.1.)"""
     from l2e_studio.peaks import far_climbs
 
     rigs = load_rigs(["kitti"])
