@@ -101,8 +101,8 @@ def far_climbs(stack: SceneStack, result: CalibrationResult, settings: Calibrati
     highest points of the far field around the result, picked at the coarsest stage's smoothing
     and scale (where a missed peak nearby has the widest basin), best first; they stop at the
     first end above the result's score further than ``RIVAL_DEG`` from it (:func:`rival_check`
-    has its answer). The climbs skip the coarse
-    stages: their blur would pull a start near another peak back into the result's wide basin
+    has its answer). ``on_progress`` sees one fraction across all the climbs. The climbs skip
+    the coarse stages: their blur would pull a start near another peak back into the result's wide basin
     (on KITTI 000008 a start 1.2 deg from the reference went back to a side peak 4.6 deg off).
     ``stack`` at the final smoothing (the verdict's) is used as it is, not prepared again."""
     stages = settings.schedule(stack.camera.width, stack.camera.height)
@@ -112,8 +112,11 @@ def far_climbs(stack: SceneStack, result: CalibrationResult, settings: Calibrati
     final = stack.with_sigma(settings.sigma)  # ``stack`` itself when it is at the final smoothing
     local = replace(settings, global_search=False, coarse_to_fine=False)  # one stage: the final smoothing
     ends = []
-    for i in np.argsort(-scores)[:FAR_CLIMBS]:
-        end = refine(final, starts[i], local, cancel, on_progress)
+    for k, i in enumerate(np.argsort(-scores)[:FAR_CLIMBS]):
+        # one progress bar across all climbs, not one per climb
+        share = None if on_progress is None else (
+            lambda p, k=k: on_progress(replace(p, fraction=(k + p.fraction) / FAR_CLIMBS)))
+        end = refine(final, starts[i], local, cancel, share)
         ends.append((end, float(final.score(end, per_scene=False)[0])))
         if ends[-1][1] > result.score_result and end.error_to(result.extrinsic)[0] >= RIVAL_DEG:
             break
