@@ -26,15 +26,13 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_realdata import LEVELS  # noqa: E402
 from realdata_rigs import load_rigs, perturbations  # noqa: E402
 
 from l2e_studio.calibrate import CalibrationSettings, calibrate, refine, stack_scenes  # noqa: E402
-from l2e_studio.peaks import FAR_CLIMBS, FAR_POINTS, RIVAL_CLIMBS, RIVAL_DEG, RIVAL_SHARE, far_starts  # noqa: E402
-
-LEVELS = {1: (1.0, 0.05), 2: (2.0, 0.10), 5: (5.0, 0.20)}
+from l2e_studio.peaks import FAR_CLIMBS, RIVAL_CLIMBS, RIVAL_DEG, RIVAL_SHARE, ranked_far_starts  # noqa: E402
 POLICIES = {
     "3 at 80 % (stop 17)": (3, RIVAL_SHARE, 0),
     "10 at 80 %": (10, RIVAL_SHARE, 0),
@@ -49,25 +47,24 @@ def climb_all(rig, runs: int) -> list[dict]:
     stack = stack_scenes(rig.scenes, rig.camera, rig.reference, CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0))
     settings = CalibrationSettings()
     final = stack.with_sigma(settings.sigma)
-    first = settings.schedule(stack.camera.width, stack.camera.height)[0]
-    coarse = stack.with_sigma(first.sigma, first.scale).thinned(FAR_POINTS)
-    local = replace(settings, global_search=False, coarse_to_fine=False)
+    local = replace(settings, global_search=False, coarse_to_fine=False)  # as far_climbs climbs
     rows = []
     for li, (level, (deg, m)) in enumerate(LEVELS.items()):
+        if deg == 0:
+            continue
         for k, (dt, dr) in enumerate(perturbations(runs, deg, m, 1000 + li)):  # bench_realdata's seeds
             seed = rig.reference.perturbed(dt, dr)
             result = calibrate(stack, None, seed, settings)
             res, score = result.extrinsic, result.score_result
-            _, starts = far_starts(res)
-            order = np.argsort([-coarse.score(e, per_scene=False)[0] for e in starts])
+            starts = ranked_far_starts(stack, res, settings)
             t = time.perf_counter()
             ends = []
-            for i in order:
-                end = refine(final, starts[i], local)
+            for start in starts:
+                end = refine(final, start, local)
                 ends.append((float(end.error_to(res)[0]), float(final.score(end, per_scene=False)[0] / score)))
             rows.append(dict(rig=rig.name, level=level, k=k, err=float(res.error_to(rig.reference)[0]),
                              search=[(float(e.error_to(res)[0]), float(s / score)) for e, s in result.ends],
-                             ends=ends, climb_s=(time.perf_counter() - t) / len(order)))
+                             ends=ends, climb_s=(time.perf_counter() - t) / len(starts)))
             print(f"{rig.name:22s} {level} deg #{k}: {rows[-1]['err']:.2f} deg off, "
                   f"{1000 * rows[-1]['climb_s']:.0f} ms a climb", flush=True)
     return rows

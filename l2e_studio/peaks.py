@@ -94,31 +94,42 @@ def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationS
                  f"away (the best of noise over the searched box reaches {need:.1f})")
 
 
+def ranked_far_starts(stack: SceneStack, at: Extrinsic, settings: CalibrationSettings) -> list[Extrinsic]:
+    """:func:`far_starts` of ``at``, best first by their score at the coarsest stage's smoothing
+    and scale (where a missed peak nearby has the widest basin)."""
+    first = settings.schedule(stack.camera.width, stack.camera.height)[0]
+    coarse = stack.with_sigma(first.sigma, first.scale).thinned(FAR_POINTS)
+    _, starts = far_starts(at)
+    scores = np.array([coarse.score(e, per_scene=False)[0] for e in starts])
+    return [starts[i] for i in np.argsort(-scores)]
+
+
+def missed_peak(result: CalibrationResult, end: Extrinsic, score: float) -> bool:
+    """Is ``end`` (scoring ``score``) a peak the search missed: further than ``RIVAL_DEG`` from the
+    result and scoring above it?"""
+    return score > result.score_result and end.error_to(result.extrinsic)[0] >= RIVAL_DEG
+
+
 def far_climbs(stack: SceneStack, result: CalibrationResult, settings: CalibrationSettings,
                cancel: threading.Event | None = None, on_progress: Callable[[Progress], None] | None = None,
                ) -> tuple[tuple[Extrinsic, float], ...]:
-    """``(end, final score)`` of local climbs at the final smoothing from the ``FAR_CLIMBS``
-    highest points of the far field around the result, picked at the coarsest stage's smoothing
-    and scale (where a missed peak nearby has the widest basin), best first; they stop at the
-    first end above the result's score further than ``RIVAL_DEG`` from it (:func:`rival_check`
-    has its answer). ``on_progress`` sees one fraction across all the climbs. The climbs skip
-    the coarse stages: their blur would pull a start near another peak back into the result's wide basin
-    (on KITTI 000008 a start 1.2 deg from the reference went back to a side peak 4.6 deg off).
-    ``stack`` at the final smoothing (the verdict's) is used as it is, not prepared again."""
-    stages = settings.schedule(stack.camera.width, stack.camera.height)
-    coarse = stack.with_sigma(stages[0].sigma, stages[0].scale).thinned(FAR_POINTS)
-    _, starts = far_starts(result.extrinsic)
-    scores = np.array([coarse.score(e, per_scene=False)[0] for e in starts])
+    """``(end, final score)`` of local climbs at the final smoothing from the first ``FAR_CLIMBS``
+    of :func:`ranked_far_starts` around the result, best first; they stop at the first
+    :func:`missed_peak` (:func:`rival_check` has its answer). ``on_progress`` sees one fraction
+    across all the climbs. The climbs skip the coarse stages: their blur would pull a start near
+    another peak back into the result's wide basin (on KITTI 000008 a start 1.2 deg from the
+    reference went back to a side peak 4.6 deg off). ``stack`` at the final smoothing (the
+    verdict's) is used as it is, not prepared again."""
     final = stack.with_sigma(settings.sigma)  # ``stack`` itself when it is at the final smoothing
     local = replace(settings, global_search=False, coarse_to_fine=False)  # one stage: the final smoothing
     ends = []
-    for k, i in enumerate(np.argsort(-scores)[:FAR_CLIMBS]):
+    for k, start in enumerate(ranked_far_starts(stack, result.extrinsic, settings)[:FAR_CLIMBS]):
         # one progress bar across all climbs, not one per climb
-        share = None if on_progress is None else (
+        progress = None if on_progress is None else (
             lambda p, k=k: on_progress(replace(p, fraction=(k + p.fraction) / FAR_CLIMBS)))
-        end = refine(final, starts[i], local, cancel, share)
+        end = refine(final, start, local, cancel, progress)
         ends.append((end, float(final.score(end, per_scene=False)[0])))
-        if ends[-1][1] > result.score_result and end.error_to(result.extrinsic)[0] >= RIVAL_DEG:
+        if missed_peak(result, *ends[-1]):
             break
     return tuple(ends)
 
@@ -132,8 +143,9 @@ def rival_check(result: CalibrationResult, climbs: Sequence[tuple[Extrinsic, flo
     if len(result.ends) < 2 or not np.isfinite(score) or score <= 0:
         return None
     rivals = len(result.ends) + RIVAL_CLIMBS  # the ends that count at a share below the result's
-    far = [(e.error_to(res)[0], s / score, i < rivals) for i, (e, s) in enumerate((*result.ends, *climbs))]
-    far = [(deg, share) for deg, share, rival in far if deg >= RIVAL_DEG and (rival or share > 1)]
+    counted = [(e.error_to(res)[0], s / score) for i, (e, s) in enumerate((*result.ends, *climbs))
+               if i < rivals or missed_peak(result, e, s)]
+    far = [(deg, share) for deg, share in counted if deg >= RIVAL_DEG]
     worst = max(far, key=lambda ds: ds[1], default=None)
     passed = worst is None or worst[1] < RIVAL_SHARE
     detail = ("no other end near its score" if worst is None else
