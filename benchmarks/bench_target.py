@@ -2,7 +2,7 @@
 distance to the references, half-splits against the reported sigma, and time.
 
     PYTHONPATH=$PWD python benchmarks/bench_target.py [--realdata ../shared/realdata] [--runs 10] [--halves 10]
-        [--synthetic 3] [--calibration 30] [--floor 20] [--synth-dir DIR] [--sets NAMES]
+        [--synthetic 3] [--calibration 30] [--floor 20] [--ablation 12] [--synth-dir DIR] [--sets NAMES]
 
 Per set: ``--runs`` seeds 2 deg / 10 cm and as many 5 deg / 20 cm off the reference (uniform
 direction, that norm), the spread of the results (max distance to their median, mm / deg), how
@@ -11,7 +11,8 @@ results against each other; each against reference.yaml and lcecalib_estimate.ya
 ``--halves`` random halves of the frames: spread per axis against the sigma each half reported;
 the time for a whole run with detection, cold (no cache) and cached. ``--calibration N``: the
 reported sigma against the true error over N synthetic sequences per modality; ``--floor N``:
-the median error the lidar's noise allows (Cramer-Rao) against the solver's.
+the median error the lidar's noise allows (Cramer-Rao) against the solver's; ``--ablation N``:
+the solver with the true camera boards and with other residual-block scales.
 """
 
 from __future__ import annotations
@@ -190,6 +191,46 @@ def information_floor(count: int, folder: Path) -> None:
           f"over {len(actual)} sequences")
 
 
+def ablation(count: int, folder: Path) -> None:
+    """What holds the solve above the information floor, on ``count`` synthetic frame-camera
+    sequences: the same lidar boards solved (a) as calibrate does, (b) with the TRUE camera
+    boards in place of the detected ones, (c) with other frame-level scales of the three residual
+    blocks (board offset m, tilt deg, edges m: solve.FRAME_PLANE_M, FRAME_TILT_DEG, FRAME_EDGE_M);
+    median error against the truth (mm / deg)."""
+    import importlib
+    import itertools
+
+    from l2e_studio.synth.board_dataset import read_board_poses
+    from l2e_studio.target import TargetFrame
+
+    S = importlib.import_module("l2e_studio.target.solve")  # the module (the package exports its solve())
+    cases = []
+    for k in range(count):
+        truth, r = synthetic_run("frame", k, folder)
+        if r is not None:
+            cases.append((truth, r, read_board_poses(folder / f"frame{k}" / "truth.yaml")))
+    prior = (S.FRAME_PLANE_M, S.FRAME_TILT_DEG, S.FRAME_EDGE_M)
+
+    def median_error(scales, true_boards: bool) -> str:
+        S.FRAME_PLANE_M, S.FRAME_TILT_DEG, S.FRAME_EDGE_M = scales
+        try:
+            errs = []
+            for truth, r, poses in cases:
+                frames = [TargetFrame(f.name, poses[f.name] if true_boards else f.detection.pose, f.lidar.points,
+                                      f.lidar.edges, f.lidar.azimuth_step_rad) for f in r.target.used]
+                g, m = truth.error_to(S.solve(frames, r.target.board, r.extrinsic, covariance=False).extrinsic)
+                errs.append((1000 * m, g))
+        finally:
+            S.FRAME_PLANE_M, S.FRAME_TILT_DEG, S.FRAME_EDGE_M = prior
+        e = np.median(np.array(errs), axis=0)
+        return f"{e[0]:.2f} mm / {e[1]:.3f} deg"
+
+    print(f"== ablation ({len(cases)} synthetic frame-camera sequences; median error, detected boards | true boards)")
+    for scales in [prior] + [s for s in itertools.product((0.03, 0.01, 0.003), (1.5, 0.5, 0.2), (0.01, 0.003)) if s != prior]:
+        print(f"   offset {scales[0]:g} m, tilt {scales[1]:g} deg, edges {scales[2]:g} m"
+              f"{' (the solve as it is)' if scales == prior else ''}: {median_error(scales, False)} | {median_error(scales, True)}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--realdata", type=Path, default=Path(__file__).resolve().parents[2] / "shared" / "realdata")
@@ -200,6 +241,8 @@ def main() -> None:
                     help="synthetic sequences per modality for the sigma calibration (0: skip)")
     ap.add_argument("--floor", type=int, default=0,
                     help="synthetic frame sequences for the information floor (Cramer-Rao; 0: skip)")
+    ap.add_argument("--ablation", type=int, default=0,
+                    help="synthetic frame sequences for the ablation: detected vs true camera boards, block scales (0: skip)")
     ap.add_argument("--synth-dir", type=Path, default=None,
                     help="keep the synthetic sequences here and reuse those already written (default: a temporary folder)")
     ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three; '' for none)")
@@ -212,6 +255,8 @@ def main() -> None:
             calibration(args.calibration, folder)
         if args.floor:
             information_floor(args.floor, folder)
+        if args.ablation:
+            ablation(args.ablation, folder)
     results = {}
     for name in filter(None, args.sets.split(",")):
         folder = args.realdata / name
