@@ -169,7 +169,7 @@ def test_a_side_peak_the_search_settled_on_meets_the_peak_it_missed() -> None:
 def test_edge_agreement_and_edge_score_take_points_on_the_image_border():
     """A point projecting exactly onto the far border (u = W - 0.5) rounds to column W with
     numpy's rint: it must count as off the image, not index past the map (a real-data crash)."""
-    from l2e_studio.verdict import edge_agreement
+    from l2e_studio.evidence import edge_agreement
 
     cam = CameraModel(np.array([[64.0, 0, 31.5], [0, 64.0, 23.5], [0, 0, 1]]), 64, 48)
     rng = np.random.default_rng(4)

@@ -8,7 +8,8 @@ import pytest
 
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.geometry import Extrinsic
-from l2e_studio.verdict import SIGNIFICANT, Spread, Verdict, halves, judge, settle
+from l2e_studio.evidence import halves
+from l2e_studio.verdict import SIGNIFICANT, Spread, Verdict, judge, settle
 
 
 @pytest.fixture(scope="module")
