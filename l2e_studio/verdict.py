@@ -3,8 +3,8 @@
 A score's maximum is only as good as the score, and on real recordings a score can peak degrees
 from the truth. So the result is judged by what the optimiser never saw or never maximised:
 
-* **halves**, **an independent second score**, **a second start**, **the result's own score**
-  (:mod:`l2e_studio.evidence`);
+* **the result's own score**, **an independent second score**, **halves** and **a second start**
+  (:mod:`l2e_studio.evidence` gathers these and the significant peak below);
 * **translation observable**: moving the result 5 cm along each axis must cost the score a fair
   share; a flat axis (forward, on one street scan) is not pinned down, whatever the optimiser says.
 * **a significant peak**: the score at the result against its own random fluctuations around it
@@ -13,6 +13,8 @@ from the truth. So the result is judged by what the optimiser never saw or never
   landscape at noise level puts its highest point wherever the noise does: the result's height
   above that far field, in standard deviations, must exceed what the best of noise reaches over
   the searched box (:func:`l2e_studio.peaks.noise_ceiling`).
+* **a single peak** (after a global search): climbs from the far field's best starts around the
+  result must not end higher, or nearly as high, somewhere else (:func:`l2e_studio.peaks.rival_check`).
 
 Per translation axis the verdict says whether the scenes pin it, and what to record when not
 (:func:`translation_axes`).
