@@ -180,6 +180,8 @@ def evidence(
     them landed from ``res``. With ``settings.rotation_only`` the translation is the seed's and
     only the rotation is tested. ``steps``: progress and cancel (:func:`evidence_steps` of them)."""
     steps = steps or Steps(evidence_steps(settings), cancel, None)
+    tag = " (rotation only)" if settings.rotation_only else ""
+    limit_deg = agreement_limit(seed, res)
     # the second start is independent of the other checks: it climbs beside them, in a thread of
     # its own (on 2 cores, 40 full-size scenes: halves and second start 1.9 s one after the
     # other, 1.45 s side by side). BLAS stays on one thread for both: the nested limits of the
@@ -188,7 +190,8 @@ def evidence(
         latest: list[Progress | None] = [None]
         second_start = pool.submit(refine, final, *_second_start(seed, res, settings, final.camera),
                                    cancel, lambda p: latest.__setitem__(0, p))
-        checks, rot_moved, trans_moved = _checks_beside(final, seed, res, settings, second, cancel, steps)
+        checks, rot_moved, trans_moved = _checks_beside(final, seed, res, settings, second, cancel, steps,
+                                                        tag, limit_deg)
         steps.next("a second start, mirrored through the result")
         while True:  # its progress shown from here on (it may well be done already)
             if latest[0] is not None:
@@ -198,8 +201,6 @@ def evidence(
         other = second_start.result()
     steps.check()
     deg, m = other.error_to(res)
-    limit_deg = agreement_limit(seed, res)
-    tag = " (rotation only)" if settings.rotation_only else ""
     checks.append(Check("second start (rotation)" + tag, deg <= limit_deg,
                         f"from a start mirrored through the result it ends {deg:.3f} deg away (limit {limit_deg:.2f})"))
     if not settings.rotation_only:
@@ -230,13 +231,12 @@ def _second_start(seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings
 
 
 def _checks_beside(final: SceneStack, seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings,
-                   second: tuple[str, Callable[[Extrinsic], float]], cancel: threading.Event | None, steps: Steps
-                   ) -> tuple[list[Check], list[float], list[float]]:
-    """The checks of :func:`evidence` but the second start: scores, significance, halves; and how
-    far each half refined alone moved the rotation (deg) and the translation (m)."""
+                   second: tuple[str, Callable[[Extrinsic], float]], cancel: threading.Event | None, steps: Steps,
+                   tag: str, limit_deg: float) -> tuple[list[Check], list[float], list[float]]:
+    """The checks of :func:`evidence` but the second start: scores, significance, halves (``tag``
+    after each name, halves agreeing within ``limit_deg``); and how far each half refined alone
+    moved the rotation (deg) and the translation (m)."""
     rotation_only = settings.rotation_only
-    tag = " (rotation only)" if rotation_only else ""
-    limit_deg = agreement_limit(seed, res)
     checks: list[Check] = []
     steps.next("the scores at the seed and at the result")
     # an optimiser that ends at the seed itself found nothing better: nothing to prefer (the

@@ -258,7 +258,7 @@ def judge(
     t0 = time.perf_counter()
     # + translation probes, + climbs from the far field after a global search
     steps = Steps(1 + evidence_steps(settings) + (not settings.rotation_only) + (len(result.ends) >= 2),
-                   cancel, on_progress)
+                  cancel, on_progress)
     seed, res = result.seed, result.extrinsic
     steps.next("preparing the final smoothing and the second score")
     final = stack.with_sigma(settings.sigma)
@@ -340,13 +340,3 @@ def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: st
     return replace(verdict, status="not-trusted", extrinsic=seed if keep else verdict.extrinsic, kept_seed=keep,
                    reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz",
                    seed_rotation=False, settled_axes="", settled="")
-
-
-
-
-
-
-
-
-
-
