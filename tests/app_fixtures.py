@@ -55,15 +55,17 @@ def write_event_recordings(folder: Path, duration_s: float = 4.0, share: float =
     return out
 
 
-def wait_for(condition: Callable[[], object], timeout: float = 20.0, interval: float = 0.02, what: str = "") -> object:
-    """Poll ``condition`` until it returns something truthy; fail the test on timeout."""
+def wait_for(condition: Callable[[], object], timeout: float = 20.0, interval: float = 0.02,
+             what: str | Callable[[], str] = "") -> object:
+    """Poll ``condition`` until it returns something truthy; fail the test on timeout, saying
+    ``what`` was awaited (a callable: called then, to say how things stood)."""
     deadline = time.monotonic() + timeout
     while True:
         value = condition()
         if value:
             return value
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what or condition}")
+            pytest.fail(f"timed out after {timeout:.0f} s waiting for {(what() if callable(what) else what) or condition}")
         time.sleep(interval)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -392,6 +393,11 @@ def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
             open_app(p, app)
             open_tab(p, "Optimise")
         app.optimise.method.value = "Nelder-Mead"
+        # a run that cannot end before the click arrives: its stages six times over (one pass is
+        # ~8 s here; in CI, with five tabs rendering, the fourth tab once still showed Cancel
+        # enabled after the run had ended, and the click then found nothing to cancel)
+        panel_settings = app.optimise.settings
+        app.optimise.settings = lambda: (lambda s: replace(s, stages=s.schedule(app.camera.width, app.camera.height) * 6))(panel_settings())
         pages[0].get_by_role("button", name="Start").click()
         wait_for(lambda: app.state.snapshot().run.evaluations >= 20, timeout=60, what="the run to get going")
         asked = []
@@ -407,7 +413,9 @@ def test_cancel_with_five_tabs_open_stops_within_a_second(browser, app):
         cancel = pages[3].get_by_role("button", name="Cancel")
         wait_for(cancel.is_enabled, timeout=30, what="Cancel enabled in the fourth tab")
         cancel.dispatch_event("click")
-        wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005, what="cancelled")
+        wait_for(lambda: app.state.snapshot().run.status == "cancelled", timeout=10, interval=0.005,
+                 what=lambda: f"cancelled (the run is {app.state.snapshot().run.status!r}; "
+                              f"the click {'reached' if asked else 'never reached'} the server)")
         # when the app closed the run, by its own clock (this thread's polling competes for the
         # same cores and GIL as the five tabs and is no part of the app either)
         stopped = app.state.snapshot().run.finished
