@@ -237,6 +237,32 @@ def test_one_davis346_two_modalities_both_trusted_and_agreeing():
 
 
 @realdata
+def test_every_seed_gets_one_answer_on_the_davis346_frames():
+    """rles01's APS frames from seven seeds 2 deg / 10 cm off: before the final solve also
+    started from the planes' closed form, two of them stopped in a shallow dent of the edge cost
+    0.027 deg beside the others (the issue asks 0.02 deg / 2 mm between any two seeds)."""
+    base = _realdata()
+    if base is None or not (base / "lcecalib_rles01_frame").is_dir():
+        pytest.skip("../shared/realdata (lcecalib_rles01_frame) not present")
+    from l2e_studio.scenes import load_scene_folder
+    from l2e_studio.target import calibrate_target, detect_frames
+
+    folder = base / "lcecalib_rles01_frame"
+    ss = load_scene_folder(folder, seed_file=folder / "reference.yaml")
+    board = load_target(folder / "target.yaml")
+    dets = detect_frames(ss.scenes, ss.camera, board)
+    rng = np.random.default_rng(0)
+    ends = []
+    for _ in range(7):
+        a, b = rng.standard_normal(3), rng.standard_normal(3)
+        seed = ss.seed.perturbed(0.1 * a / np.linalg.norm(a), np.radians(2.0) * b / np.linalg.norm(b))
+        ends.append(calibrate_target(ss.scenes, ss.camera, seed, board, detections=dets).extrinsic)
+    for e in ends:
+        deg, m = ends[0].error_to(e)
+        assert deg < 0.005 and m < 1e-4, (deg, m)
+
+
+@realdata
 def test_cli_target_writes_the_target_section(tmp_path):
     base = _realdata()
     if base is None:

@@ -256,7 +256,8 @@ def calibrate_target(
     used = [n for n, b in boards.items() if b.found and n not in left_out]
     final_frames = frames_of(used)
     if sol is not None and not _cancelled(cancel):
-        sol = solve(final_frames, board, current, settings.use_edges, covariance=True)
+        sol = solve(final_frames, board, current, settings.use_edges, covariance=True,
+                    also_from=[closed_form(final_frames, current)])
         current = sol.extrinsic
     loo = _leave_one_out(final_frames, board, current, settings) if (
         settings.leave_one_out and sol is not None and not _cancelled(cancel)) else {}
