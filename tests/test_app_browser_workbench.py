@@ -1,14 +1,16 @@
 """The workbench at a laptop's 1366x768, in a real browser (headless Debian Chromium): seed values
 refused beside their field and never left out of step with the state (after Reset, Undo or a loaded
 seed file), the tabs on one row, the picking mode for PnP, a saved result offered as a download, the
-swipe as the default before/after comparison, and a real rig at default settings (skipped when
-../shared/realdata is absent). Screenshots land in ``test-artifacts/app/``.
+swipe as the default before/after comparison, the first-steps hint on the embedded sample (and none
+without a truth file), and a real rig at default settings (skipped when ../shared/realdata is
+absent). Screenshots land in ``test-artifacts/app/``.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -271,6 +273,68 @@ def test_the_swipe_is_the_default_before_after_comparison(laptop, app):
     page.mouse.up()
     wait_for(lambda: app.compare.amount.value == pytest.approx(0.25, abs=0.03), what="the swipe at 25 %")
     assert app.compare.mode.value == "swipe"
+
+
+# --- the first-run hint ------------------------------------------------------------------------------
+
+@contextmanager
+def laptop_on(browser, folder: Path, out: Path):  # noqa: F811
+    """A page at 1366x768 on an app over another scene folder: (page, app)."""
+    from l2e_studio.app.server import build_app
+    from l2e_studio.scenes import load_scene_folder
+
+    other = build_app(load_scene_folder(folder), host="127.0.0.1", port=free_port(), out_dir=out)
+    context = browser.new_context(viewport=LAPTOP)
+    try:
+        context.set_default_timeout(60_000)
+        page = context.new_page()
+        open_app(page, other)
+        yield page, other
+    finally:
+        context.close()  # before the app stops
+        other.stop()
+
+
+def test_the_embedded_sample_opens_with_a_first_steps_hint(browser, tmp_path):  # noqa: F811
+    """The sample as `l2e-studio app` with no folder opens it: the Scenes tab says at first sight
+    that the seed is off on purpose (by truth.yaml's amounts) and what to press."""
+    import yaml
+
+    from l2e_studio.samples import sample_scenes_dir
+
+    err = yaml.safe_load((sample_scenes_dir() / "truth.yaml").read_text())["seed_error"]
+    with laptop_on(browser, sample_scenes_dir(), tmp_path / "results") as (page, _):
+        hint = page.locator("text=First steps >> visible=true").first
+        hint.wait_for()
+        text = " ".join(hint.locator("xpath=ancestor::div[1]").inner_text().split())
+        assert (f"seed is off on purpose, by {err['rotation_deg']:.1f}° and {100 * err['translation_m']:.1f} cm"
+                in text), text
+        assert "2.0° and 5.0 cm" in text  # the sample's own amounts, as the README tells them
+        for words in ("Press Start in the Optimise tab", "compare in Before / after", "in the Result tab"):
+            assert words in text, (words, text)
+        box = hint.bounding_box()
+        assert 0 <= box["y"] and box["y"] + box["height"] <= LAPTOP["height"]  # on screen without scrolling
+        assert page.get_by_role("tab", name="Scenes").get_attribute("aria-selected") == "true"
+        screenshot(page, "40_sample_first_steps")
+
+
+@pytest.mark.parametrize("truth", ["absent", "without seed_error"])
+def test_no_first_steps_hint_without_a_truth_file_saying_how_far_off_the_seed_is(browser, tmp_path, truth):  # noqa: F811
+    from app_fixtures import write_small_scenes
+
+    folder = write_small_scenes(tmp_path / "scenes", n_scenes=2)
+    if truth == "absent":
+        (folder / "truth.yaml").unlink()
+    else:  # a truth file of a real rig: the transform only
+        import yaml
+
+        doc = yaml.safe_load((folder / "truth.yaml").read_text())
+        (folder / "truth.yaml").write_text(yaml.safe_dump({"T_cam_lidar": doc["T_cam_lidar"]}))
+    with laptop_on(browser, folder, tmp_path / "results") as (page, other):
+        page.get_by_text("2 scenes").first.wait_for()  # the Scenes tab, drawn after the hint's place
+        assert page.locator("text=First steps >> visible=true").count() == 0
+        assert page.locator("text=off on purpose >> visible=true").count() == 0
+        assert not other.scenes.hint.visible and other.scenes.hint.content == ""
 
 
 # --- a real rig at default settings ------------------------------------------------------------------
