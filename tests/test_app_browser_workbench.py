@@ -87,7 +87,7 @@ def test_refused_seed_values_are_said_beside_the_field_and_reset_puts_field_and_
 def test_tabs_fit_one_row_at_1366x768_and_stay_there_on_switching(laptop, app):
     page = laptop
     tabs = page.get_by_role("tab")
-    names = ["Scenes", "Seed", "Optimise", "Result", "QA"]
+    names = ["Scenes", "Seed", "Optimise", "Target", "Result", "QA"]
     for name in names + ["Overlay"]:
         page.get_by_role("tab", name=name).wait_for()
 
