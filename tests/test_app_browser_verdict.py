@@ -116,7 +116,9 @@ def test_trusted_rotation_result_tab_before_after_exports_and_one_number(page, a
     open_tab(page, "QA")
     from l2e_studio.export import EXPORT_FORMATS
 
-    for fmt, mark in (("ros2", "# "), ("urdf", "<!-- "), ("matrix", "# "), ("kalibr", "# "), ("json", '  "status"')):
+    marks = {"ros1": "# ", "ros2": "# ", "urdf": "<!-- ", "matrix": "# ", "kalibr": "# ", "yaml": "# ", "json": '  "status"'}
+    assert set(marks) == set(EXPORT_FORMATS)  # every format the QA tab offers
+    for fmt, mark in marks.items():
         app.qa.fmt.value = fmt
         page.get_by_role("button", name="Download export").click()
         link = page.locator(f"a[download='T_cam_lidar{EXPORT_FORMATS[fmt]}']").last  # viser's download notice

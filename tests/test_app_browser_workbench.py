@@ -1,13 +1,16 @@
 """The workbench at a laptop's 1366x768, in a real browser (headless Debian Chromium): seed values
-refused beside their field and never left out of step with the state, the tabs on one row, the
-picking mode for PnP, a saved result offered as a download, and a real rig at default settings
-(skipped when ../shared/realdata is absent). Screenshots land in ``test-artifacts/app/``.
+refused beside their field and never left out of step with the state (after Reset, Undo or a loaded
+seed file), the tabs on one row, the picking mode for PnP, a saved result offered as a download, the
+swipe as the default before/after comparison, the first-steps hint on the embedded sample (and none
+without a truth file), and a real rig at default settings (skipped when ../shared/realdata is
+absent). Screenshots land in ``test-artifacts/app/``.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -84,7 +87,7 @@ def test_refused_seed_values_are_said_beside_the_field_and_reset_puts_field_and_
 def test_tabs_fit_one_row_at_1366x768_and_stay_there_on_switching(laptop, app):
     page = laptop
     tabs = page.get_by_role("tab")
-    names = ["Scenes", "Seed", "Optimise", "Result", "QA"]
+    names = ["Scenes", "Seed", "Optimise", "Target", "Result", "QA"]
     for name in names + ["Overlay"]:
         page.get_by_role("tab", name=name).wait_for()
 
@@ -200,6 +203,138 @@ def test_editing_a_display_field_keeps_the_overlay_in_view(laptop, app):
     time.sleep(1.0)
     assert abs(img.bounding_box()["y"] - y0) < 5  # the overlay did not move away
     screenshot(page, "36_display_edit_keeps_overlay")
+
+
+def test_load_seed_file_after_a_refused_value_puts_fields_sliders_and_state_in_step(laptop, app, tmp_path):
+    """The third way back from a refused value (Reset and Undo: above): a seed file loaded by the
+    upload button rewrites every field and slider, and the refusal goes with its text."""
+    from l2e_studio.app.exact import format_value
+    from l2e_studio.app.files import seed_document
+
+    page = laptop
+    open_tab(page, "Seed")
+    loaded = app.state.reference.perturbed([0.012, -0.007, 0.004], np.radians([0.3, -0.2, 0.5]))
+    path = tmp_path / "other_seed.yaml"
+    path.write_bytes(seed_document(loaded))
+    x, _ = problem_beside(page, "x")
+    x.fill("1e9")
+    page.get_by_text("x: 1e9 m is outside [-100, 100] m").first.wait_for()
+    with page.expect_file_chooser() as chooser:
+        page.get_by_role("button", name="Load seed file").click()
+    chooser.value.set_files(str(path))
+    page.get_by_text("other_seed.yaml: the sliders now show it").first.wait_for()
+    wait_for(lambda: np.allclose(app.state.snapshot().extrinsic.matrix, loaded.matrix, atol=1e-9), what="the loaded seed")
+    wait_for(lambda: x.input_value() == format_value(app.extrinsic.values[0]), what="x rewritten")
+    assert app.extrinsic.values[0] == pytest.approx(loaded.translation[0], abs=1e-6)
+    for i, axis in enumerate(("x", "y", "z", "roll", "pitch", "yaw")):
+        assert exact_field(page, axis).input_value() == format_value(app.extrinsic.values[i]), axis
+        assert app.extrinsic.sliders[i].value == pytest.approx(app.extrinsic.values[i], abs=1e-9), axis
+    assert not any(p.visible for p in app.extrinsic.problems)
+    assert page.get_by_text("x: 1e9 m is outside").count() == 0
+    screenshot(page, "38_seed_loaded_after_refusal")
+
+
+def test_the_swipe_is_the_default_before_after_comparison(laptop, app):
+    """Nothing chosen: after a run, Before / after shows one map-wide image split by the swipe line
+    (side by side would be two maps wide), and a drag on it moves the line."""
+    page = laptop
+    open_tab(page, "Optimise")
+    page.get_by_text("Rotation only").click()
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=180_000)
+    page.get_by_role("tab", name="Before / after").click()
+    wait_for(lambda: app.compare.frames >= 1 and app.compare.image.visible, what="the before/after image")
+    assert app.compare.mode.value == "swipe"
+    from test_app_browser import labelled
+
+    assert labelled(page, "Compare").input_value() == "swipe"  # what the page shows chosen
+    img = page.locator("img[src^='blob:']").nth(1)
+    img.wait_for()
+    w, h = page.evaluate("i => [i.naturalWidth, i.naturalHeight]", img.element_handle())
+    assert w / h == pytest.approx(app.camera.width / app.camera.height, rel=0.03)  # one map, not two
+    # the swipe line: the columns yellow from top to bottom (not a yellow point) in the image the page
+    # decoded, at the middle (the amount starts at 0.5)
+    line = page.evaluate("""i => { const c = document.createElement('canvas'); c.width = i.naturalWidth;
+        c.height = i.naturalHeight; const g = c.getContext('2d'); g.drawImage(i, 0, 0);
+        const d = g.getImageData(0, 0, c.width, c.height).data, cols = [];
+        for (let x = 0; x < c.width; x++) { let n = 0;
+            for (let y = 0; y < c.height; y++) { const k = 4 * (y * c.width + x);
+                if (d[k] > 180 && d[k + 1] > 180 && d[k + 2] < 110) n++; }
+            if (n > 0.8 * c.height) cols.push(x); }
+        return cols; }""", img.element_handle())
+    assert line and all(abs(x - w / 2) <= 3 for x in line), (line, w)
+    screenshot(page, "39_before_after_swipe_default")
+    box = img.bounding_box()
+    page.mouse.move(box["x"] + box["width"] * 0.5, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    for f in np.linspace(0.5, 0.25, 6):
+        page.mouse.move(box["x"] + box["width"] * f, box["y"] + box["height"] / 2)
+        time.sleep(0.08)
+    page.mouse.up()
+    wait_for(lambda: app.compare.amount.value == pytest.approx(0.25, abs=0.03), what="the swipe at 25 %")
+    assert app.compare.mode.value == "swipe"
+
+
+# --- the first-run hint ------------------------------------------------------------------------------
+
+@contextmanager
+def laptop_on(browser, folder: Path, out: Path):  # noqa: F811
+    """A page at 1366x768 on an app over another scene folder: (page, app)."""
+    from l2e_studio.app.server import build_app
+    from l2e_studio.scenes import load_scene_folder
+
+    other = build_app(load_scene_folder(folder), host="127.0.0.1", port=free_port(), out_dir=out)
+    context = browser.new_context(viewport=LAPTOP)
+    try:
+        context.set_default_timeout(60_000)
+        page = context.new_page()
+        open_app(page, other)
+        yield page, other
+    finally:
+        context.close()  # before the app stops
+        other.stop()
+
+
+def test_the_embedded_sample_opens_with_a_first_steps_hint(browser, tmp_path):  # noqa: F811
+    """The sample as `l2e-studio app` with no folder opens it: the Scenes tab says at first sight
+    that the seed is off on purpose (by truth.yaml's amounts) and what to press."""
+    import yaml
+
+    from l2e_studio.samples import sample_scenes_dir
+
+    err = yaml.safe_load((sample_scenes_dir() / "truth.yaml").read_text())["seed_error"]
+    with laptop_on(browser, sample_scenes_dir(), tmp_path / "results") as (page, _):
+        hint = page.locator("text=First steps >> visible=true").first
+        hint.wait_for()
+        text = " ".join(hint.locator("xpath=ancestor::div[1]").inner_text().split())
+        assert (f"seed is off on purpose, by {err['rotation_deg']:.1f}° and {100 * err['translation_m']:.1f} cm"
+                in text), text
+        assert "2.0° and 5.0 cm" in text  # the sample's own amounts, as the README tells them
+        for words in ("Press Start in the Optimise tab", "compare in Before / after", "in the Result tab"):
+            assert words in text, (words, text)
+        box = hint.bounding_box()
+        assert 0 <= box["y"] and box["y"] + box["height"] <= LAPTOP["height"]  # on screen without scrolling
+        assert page.get_by_role("tab", name="Scenes").get_attribute("aria-selected") == "true"
+        screenshot(page, "40_sample_first_steps")
+
+
+@pytest.mark.parametrize("truth", ["absent", "without seed_error"])
+def test_no_first_steps_hint_without_a_truth_file_saying_how_far_off_the_seed_is(browser, tmp_path, truth):  # noqa: F811
+    from app_fixtures import write_small_scenes
+
+    folder = write_small_scenes(tmp_path / "scenes", n_scenes=2)
+    if truth == "absent":
+        (folder / "truth.yaml").unlink()
+    else:  # a truth file of a real rig: the transform only
+        import yaml
+
+        doc = yaml.safe_load((folder / "truth.yaml").read_text())
+        (folder / "truth.yaml").write_text(yaml.safe_dump({"T_cam_lidar": doc["T_cam_lidar"]}))
+    with laptop_on(browser, folder, tmp_path / "results") as (page, other):
+        page.get_by_text("2 scenes").first.wait_for()  # the Scenes tab, drawn after the hint's place
+        assert page.locator("text=First steps >> visible=true").count() == 0
+        assert page.locator("text=off on purpose >> visible=true").count() == 0
+        assert not other.scenes.hint.visible and other.scenes.hint.content == ""
 
 
 # --- a real rig at default settings ------------------------------------------------------------------

@@ -168,7 +168,7 @@ def test_report_opens_in_chromium_and_every_image_loads(report):
     with sync_playwright() as pw:
         browser = launch_browser(pw)
         try:
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page = browser.new_page(viewport={"width": 1366, "height": 768})  # a laptop, as the app tests
             page.route("**/*", lambda route: route.abort() if not route.request.url.startswith(("file:", "data:"))
                        else route.continue_())  # offline: anything fetched from the network fails
             page.goto(report.as_uri())
