@@ -69,6 +69,14 @@ def overlay(event_map: np.ndarray, points: np.ndarray, intensity: np.ndarray, ex
     return draw_points(img, uv, colors, disc_size(point_px, per_screen), 0.85, depth, disc_size(1, per_screen))
 
 
+def crop_factor(camera: CameraModel, box: tuple[int, int, int, int]) -> int:
+    """How much more than the full figure a crop ``box`` (x0, y0, w, h) is enlarged: at least 2x,
+    and enough to make it as wide as the full figure. A page shows an image no wider than it is,
+    so a narrower crop would show its discs smaller than the full figure's, 1 px cores whose
+    colour the dark outline swallows (a 192 px crop of a 640 px map at 2x: 384 px)."""
+    return max(2, -(-int(camera.width) // max(int(box[2]), 1)))
+
+
 def crop_box(event_map: np.ndarray, frac: float = 0.3) -> tuple[int, int, int, int]:
     """(x0, y0, w, h) of the ``frac``-sized window with the most event structure (gradient energy)."""
     m = cv2.GaussianBlur(np.asarray(event_map, np.float32), (0, 0), 3.0)  # structure, not pixel noise

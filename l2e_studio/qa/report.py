@@ -379,9 +379,10 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
 
     # overlays
     kinds = sorted({MAP_NAMES.get(sc.map_kind, sc.map_kind) for sc in ss.scenes})
-    add("<h2 id='overlays'>Before / after, every scene</h2><p class='small'>Lidar points coloured by intensity over the "
-        f"{_e(' or '.join(kinds))}: seed (left) and result (right), full resolution, then a 2x crop of the region with "
-        "most structure.</p>")
+    add("<h2 id='overlays'>Before / after, every scene</h2><p class='small'>Lidar points (coloured by intensity on "
+        "event maps, by depth on camera images) over the "
+        f"{_e(' or '.join(kinds))}: seed (left) and result (right), full resolution, then an enlarged crop of the region "
+        "with most structure.</p>")
     cam = ss.camera
     for k, sc in enumerate(ss.scenes):
         say(f"overlay {k + 1}/{len(ss.scenes)}")
@@ -389,8 +390,9 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         before = figures.overlay(sc.event_map, sc.points, sc.intensity, inp.seed, cam, clip, map_kind=sc.map_kind)
         after = figures.overlay(sc.event_map, sc.points, sc.intensity, ext, cam, clip, map_kind=sc.map_kind)
         box = figures.crop_box(sc.event_map)
+        zoom = figures.crop_factor(cam, box)
         crops = [figures.overlay(sc.event_map, sc.points, sc.intensity, e, cam, clip, map_kind=sc.map_kind, box=box,
-                                 factor=2) for e in (inp.seed, ext)]
+                                 factor=zoom) for e in (inp.seed, ext)]
         f = figures.display_factor(cam)
         j = table.scenes.index(sc.name) if sc.name in table.scenes else -1
         mi = (f" - paper's MI seed {_fmt(table.per_scene[0, j])}, result {_fmt(table.per_scene[1, j])}"
@@ -399,7 +401,7 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
         add(f"<h3>{_e(sc.name)} ({_e(kind)}){_e(mi)}</h3><div class='pair'>"
             f"<figure><img alt='{_e(sc.name)} seed' src='{figures.data_uri_jpeg(before)}'><figcaption>seed, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
             f"<figure><img alt='{_e(sc.name)} result' src='{figures.data_uri_jpeg(after)}'><figcaption>result, full resolution{_e(f' (drawn at {f}x)' if f > 1 else '')}</figcaption></figure>"
-            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(crops[0], 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged 2x, points at the same size</figcaption></figure>"
+            f"<figure><img alt='{_e(sc.name)} seed crop' src='{figures.data_uri_jpeg(crops[0], 85)}'><figcaption>seed, crop x{box[0]} y{box[1]} {box[2]}x{box[3]} px (map pixels), enlarged {zoom}x, points at the same size</figcaption></figure>"
             f"<figure><img alt='{_e(sc.name)} result crop' src='{figures.data_uri_jpeg(crops[1], 85)}'><figcaption>result, same crop</figcaption></figure>"
             "</div>")
 
