@@ -378,10 +378,10 @@ def _page(inp, ss, table: ScoreTable, sw: list[Sweep1D], sw2: Sweep2D, unc, unc_
                 "<figcaption>Spread of the result against the number of scenes used.</figcaption></figure>")
 
     # overlays
-    kinds = sorted({MAP_NAMES.get(sc.map_kind, sc.map_kind) for sc in ss.scenes})
-    add("<h2 id='overlays'>Before / after, every scene</h2><p class='small'>Lidar points (coloured by intensity on "
-        "event maps, by depth on camera images) over the "
-        f"{_e(' or '.join(kinds))}: seed (left) and result (right), full resolution, then an enlarged crop of the region "
+    kinds = sorted({sc.map_kind for sc in ss.scenes})
+    shown = " or ".join(f"coloured by {'intensity' if k == 'events' else 'depth'} over the {MAP_NAMES.get(k, k)}" for k in kinds)
+    add("<h2 id='overlays'>Before / after, every scene</h2><p class='small'>Lidar points "
+        f"{_e(shown)}: seed (left) and result (right), full resolution, then an enlarged crop of the region "
         "with most structure.</p>")
     cam = ss.camera
     for k, sc in enumerate(ss.scenes):
