@@ -111,6 +111,15 @@ def test_a_checkerboard_run_and_a_frame_left_out_by_a_click(app):
     assert len(rows) == 6 and all(float(r[6]) > 0 and float(r[7]) > 0 for r in rows)  # plane, edge RMS (mm)
     verdict = app.state.snapshot().verdict
     assert verdict is not None and f"Verdict: {verdict.summary()}" in app.results.summary.content
+    # one score, one scale: the Result tab's numbers are the readout's, under the readout's name
+    # (the run's own "board planes" are minus mm; they were shown as the seed's beside the readout's)
+    label, names = app.readout.label, app.state.scene_names
+    assert label != "board planes" and f"**{label} " in app.results.summary.content
+    assert "board planes" not in app.results.summary.content + app.results.table.content
+    at_seed = app.readout.read(first.seed, [True] * len(names)).per_scene
+    rows = {r.split("|")[1].strip(): r.split("|") for r in app.results.table.content.splitlines() if r.startswith("| scene_")}
+    for i, n in enumerate(names):
+        assert float(rows[n][2]) == pytest.approx(at_seed[i], rel=1e-3, abs=1e-6), (n, rows[n])
     assert sum(bool(v.used) for v in app.target.views.values()) >= 4
     # a click on the first cell of scene_002's row leaves it out (the page writes this pointer)
     app.scenes.pointer.value = "toggle:scene_002,1"

@@ -32,6 +32,8 @@ class ResultScores:
     accepted: Answer
     file: Answer
     per_scene_accepted: np.ndarray  # every scene of the session, at ``accepted``
+    per_scene_seed: np.ndarray | None = None  # every scene of the session, at the run's seed
+    label: str = ""  # the readout's score name: the run's own may differ (a checkerboard run's "board planes")
 
     @property
     def same(self) -> bool:
@@ -70,14 +72,17 @@ def result_scores(snap: Any, scene_names: list[str], readout: MiReadout) -> Resu
 
     accepted_ext, file_ext = snap.accepted, snap.handed_back
     at_accepted = readout.read(accepted_ext, mask)  # pooled over the run's scenes, and every scene's own
+    at_seed = readout.read(r.seed, mask)
     file_what = what_is_handed_back(snap.verdict, snap.judging_cancelled, bool(r.cancelled))
     accepted = Answer(file_what if accepted_ext is file_ext else "the optimiser's answer (not trusted: your call)",
                       accepted_ext, at_accepted.total)
     return ResultScores(
-        seed=Answer("the run's seed", r.seed, score(r.seed)),
+        seed=Answer("the run's seed", r.seed, at_seed.total),
         optimiser=Answer("the optimiser's own answer", r.extrinsic,
                          accepted.score if r.extrinsic is accepted_ext else score(r.extrinsic)),
         accepted=accepted,
         file=accepted if file_ext is accepted_ext else Answer(file_what, file_ext, score(file_ext)),
         per_scene_accepted=np.asarray(at_accepted.per_scene, dtype=np.float64),
+        per_scene_seed=np.asarray(at_seed.per_scene, dtype=np.float64),
+        label=readout.label,
     )

@@ -263,11 +263,12 @@ class Runner:
             v = snap.verdict
             verb = ("cancelled" if r.cancelled else "finished, judging cancelled: not judged" if snap.judging_cancelled
                     else "finished")
-            scores = app.result_scores
-            at = scores.accepted.score if scores is not None else r.score_result
+            scores = app.result_scores  # on the readout's scale, as the Seed and Result tabs show them
+            label, before, at = ((scores.label, scores.seed.score, scores.accepted.score) if scores is not None
+                                 else (score_label(r.objective), r.score_seed, r.score_result))
             app.notify_all(
                 f"{name} {verb}",
-                f"{score_label(r.objective)} {score_num(r.score_seed)} -> {score_num(at)} ({change(at, r.score_seed)}) "
+                f"{label} {score_num(before)} -> {score_num(at)} ({change(at, before)}) "
                 f"after {r.evaluations} evaluations ({r.seconds:.1f} s)."
                 + (f" Verdict: {v.summary()}." if v is not None else " Verdict: not judged.")
                 + " See the Result tab and Before / after.",

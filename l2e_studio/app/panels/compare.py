@@ -12,7 +12,7 @@ from ..context import Workbench
 from ..exact import parse_number
 from ..overlay import COMPARE_MODES, compose_before_after
 from ..state import Snapshot
-from ..text import change, score_label, score_num
+from ..text import change, score_num
 
 if TYPE_CHECKING:
     from .overlay_view import OverlayPanel
@@ -74,7 +74,7 @@ class ComparePanel:
             return
         r = snap.result
         name = self.app.state.scene_names[snap.selected]
-        label = score_label(r.objective)
+        label = self.app.readout.label
         # both scored by the readout, like the Seed tab and the Result tab
         everything = [True] * len(self.app.state.scene_names)
         at_seed = self.app.readout.read(r.seed, everything).per_scene[snap.selected]

@@ -88,7 +88,7 @@ class ResultPanel:
         state = ("■ **Run cancelled**: the best point so far, not a converged result" if cancelled
                  else "■ **Run finished, judging cancelled**" if snap.judging_cancelled
                  else "✓ **Run finished**")
-        label = score_label(r.objective)
+        label = scores.label if scores is not None else score_label(r.objective)
         if scores is None:  # not scored on the readout's scale: the run's own numbers
             scores = ResultScores(Answer("the run's seed", r.seed, r.score_seed),
                                   Answer("the optimiser's own answer", r.extrinsic, r.score_result),
@@ -114,7 +114,8 @@ class ResultPanel:
             lines.append(line("The optimiser's own answer (not handed back)", scores.optimiser, what=False))
         lines.append(f"After Accept: {describe(scores.accepted.extrinsic, self.app.state.reference)}")
         self.summary.content = "  \n".join(lines)
-        self.table.content = result_table(r, held_out, scores.per_scene_accepted, self.app.state.scene_names)
+        self.table.content = result_table(r, held_out, scores.per_scene_accepted, self.app.state.scene_names,
+                                          scores.per_scene_seed, scores.label or None)
 
 
 def not_judged_text(cancelled: bool) -> str:
@@ -152,17 +153,22 @@ def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
     return "red", "Accept anyway (not trusted)"
 
 
-def result_table(result, held_out: Sequence[HeldOutScore] = (), accepted=None, names: Sequence[str] = ()) -> str:
+def result_table(result, held_out: Sequence[HeldOutScore] = (), accepted=None, names: Sequence[str] = (),
+                 seed=None, label: str | None = None) -> str:
     """Markdown: one row per optimised scene, then the held-out ones marked as such. The result
     column is what Accept sets (``accepted``: every scene's score there, in ``names`` order),
-    else the optimiser's answer."""
-    label = score_label(result.objective)
+    else the optimiser's answer; ``seed`` (same order) and ``label``: the readout's numbers at the
+    run's seed and its score's name, so that both columns are on one scale (a checkerboard run's
+    own numbers are its board planes, not the readout's score)."""
+    label = label or score_label(result.objective)
     index = {n: i for i, n in enumerate(names)}
     head = "after Accept" if accepted is not None else "result"
     rows = [f"| scene | {label} seed | {label} {head} | change |", "|:--|--:|--:|--:|"]
     for name, a, b in zip(result.scene_names, result.score_seed_per_scene, result.score_result_per_scene):
         if accepted is not None and name in index:
             b = accepted[index[name]]
+        if seed is not None and name in index:
+            a = seed[index[name]]
         rows.append(f"| {name} | {score_num(a)} | {score_num(b)} | {change(b, a)} |")
     for h in held_out:
         rows.append(f"| {h.name} (held out) | {score_num(h.score_seed)} | {score_num(h.score_result)} | "
