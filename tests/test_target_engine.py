@@ -180,6 +180,54 @@ def test_lidar_board_found_beside_a_wall_and_a_floor_from_an_offset_seed():
     assert len(found.edges) == 2 * 10
 
 
+def test_a_hand_on_the_boards_rim_is_cropped_off_once_the_extrinsic_is_refined():
+    """A hand holding the board's bottom edge: points 2.5-6 cm beyond the outline, 4 cm in front
+    of the board (within the lidar's plane tolerance). The first crop's 5 cm margin takes them
+    and their rings end on the hand; the refined crop's 2 cm margin (TargetSettings) leaves them
+    out, so the rings end on the board."""
+    from l2e_studio.target import Detection, TargetSettings
+
+    rng = np.random.default_rng(8)
+    pose = Extrinsic.from_rpy([5.0, 20.0, 0.0], [0.1, 0.0, 2.0])
+    pts, _ = lidar_board(pose, TRUTH, rng, noise=0.005, rows=10)
+    h = BOARD.size_m[1] / 2
+    hand_board = np.column_stack([rng.uniform(-0.2, 0.2, 300), rng.uniform(h + 0.025, h + 0.06, 300),
+                                  np.full(300, -0.04)])  # board frame: z into the board, so in front of it
+    hand = TRUTH.inverse().compose(pose).transform(hand_board)
+    scan = np.vstack([pts, hand])
+    rings = np.concatenate([np.repeat(np.arange(10), 60), np.full(len(hand), 9)])  # the hand on the bottom ring
+    det = Detection("f", True, "", np.zeros((48, 2)), pose, 0.1, "test")
+    settings = TargetSettings()
+    loose = crop_board(scan, rings, det, BOARD, TRUTH, settings.margin(0))
+    tight = crop_board(scan, rings, det, BOARD, TRUTH, settings.margin(1))
+    assert settings.margin(0) == 0.05 and settings.margin(1) == settings.margin(5) == 0.02
+    assert np.sum(loose.indices >= len(pts)) > 100  # the hand is in the first crop
+    assert tight.found and np.all(tight.indices < len(pts)), np.sum(tight.indices >= len(pts))
+    to_board = pose.inverse().compose(TRUTH)
+    for found, on_board in ((loose, False), (tight, True)):
+        q = to_board.transform(found.edges)
+        assert bool(np.all(np.abs(q[:, 1]) <= h + 0.005)) is on_board
+
+
+def test_a_board_seen_on_a_few_rings_has_a_loose_tilt_across_them():
+    """The lidar plane's own tilt uncertainty (TargetFrame.normal_spread): a whole board crossed
+    by ten rings fixes its tilt to a fraction of a degree; the same board seen on its two bottom
+    rings only (its top above the lidar's highest beam) is a sliver, loose across the rings by
+    degrees (the solve then weighs that tilt less), and the same along them."""
+    rng = np.random.default_rng(4)
+    pose = Extrinsic.from_rpy([0.0, 15.0, 0.0], [0.0, 0.0, 2.5])
+    pts, edges = lidar_board(pose, TRUTH, rng, noise=0.015, rows=10)
+    whole = TargetFrame("whole", pose, pts, edges)
+    sliver = TargetFrame("sliver", pose, pts[-120:], edges[-4:])  # the last two rows: 2 rings, 7 cm apart
+    sd = {f.name: np.degrees(np.sqrt(np.linalg.eigvalsh(f.normal_spread[1]))) for f in (whole, sliver)}
+    assert np.all(sd["whole"] < 0.3), sd
+    assert sd["sliver"].max() > 1.5 and sd["sliver"].min() < 0.4, sd
+    # analytic: the points' scatter off their plane over the root of the sum of squared offsets
+    # across the rings (two rows 1.7 h / 9 apart: each point half that off the middle)
+    across = sliver.lidar_rms / np.sqrt(120 * (0.85 * BOARD.size_m[1] / 9) ** 2 / 4)
+    assert sd["sliver"].max() == pytest.approx(np.degrees(across), rel=0.1)
+
+
 realdata = pytest.mark.realdata
 
 
@@ -257,9 +305,9 @@ def test_every_seed_gets_one_answer_on_the_davis346_frames():
         a, b = rng.standard_normal(3), rng.standard_normal(3)
         seed = ss.seed.perturbed(0.1 * a / np.linalg.norm(a), np.radians(2.0) * b / np.linalg.norm(b))
         ends.append(calibrate_target(ss.scenes, ss.camera, seed, board, detections=dets).extrinsic)
-    for e in ends:
+    for e in ends:  # the issue's own bound between any two seeds' results
         deg, m = ends[0].error_to(e)
-        assert deg < 0.005 and m < 1e-4, (deg, m)
+        assert deg < 0.02 and m < 0.002, (deg, m)
 
 
 @realdata

@@ -43,6 +43,7 @@ from .solve import (EDGE_SIGMA_M, PLANE_SIGMA_M, Observability, TargetFrame, clo
 
 OBJECTIVE = "board planes"  # CalibrationResult.objective of this method; score = -RMS point-to-plane distance (mm)
 MIN_FRAMES = 3
+SETTLE_CROPS = 3  # crops after the scheduled refinements, until they hold the same points as the last
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,11 @@ class TargetSettings:
     """What the target method does. ``seed_deg``/``seed_m``: how far off the seed may be (the
     lidar search region grows with them); ``use_edges``: the edge-to-outline residuals (the
     in-plane constraint); ``outlier_factor``: a frame whose plane or edge RMS exceeds this many
-    times the median frame's (and twice the sensor noise) is left out."""
+    times the median frame's (and twice the sensor noise) is left out. ``crop_margins_m``: how
+    far beyond the board's outline each refinement's crop reaches (the last one for any further
+    refinement): generous while the extrinsic is the first solve's, tight once it has been
+    refined, so that a hand or the stand at the board's rim (coplanar within the lidar's noise)
+    neither tilts the plane nor makes the rings' ends."""
 
     seed_deg: float = 6.0
     seed_m: float = 0.25
@@ -58,10 +63,16 @@ class TargetSettings:
     outlier_factor: float = 3.0
     leave_one_out: bool = True
     refinements: int = 2
+    crop_margins_m: tuple[float, ...] = (0.05, 0.02)
+
+    def margin(self, refinement: int) -> float:
+        """The crop margin (m) of refinement ``refinement`` (0-based)."""
+        return self.crop_margins_m[min(refinement, len(self.crop_margins_m) - 1)]
 
     def to_dict(self) -> dict:
         return {"seed_deg": self.seed_deg, "seed_m": self.seed_m, "use_edges": self.use_edges,
-                "outlier_factor": self.outlier_factor, "plane_sigma_m": PLANE_SIGMA_M, "edge_sigma_m": EDGE_SIGMA_M}
+                "outlier_factor": self.outlier_factor, "plane_sigma_m": PLANE_SIGMA_M, "edge_sigma_m": EDGE_SIGMA_M,
+                "crop_margins_m": list(self.crop_margins_m)}
 
 
 @dataclass(frozen=True)
@@ -239,12 +250,18 @@ def calibrate_target(
         sol = solve(frames, board, closed_form(frames, seed), settings.use_edges, covariance=False)
         current = sol.extrinsic
         tick(2, 0.3, current, frames, board)
-        for _ in range(settings.refinements):
+        cropped = None
+        for k in range(settings.refinements + SETTLE_CROPS):
             if _cancelled(cancel):
                 break
             for n in boards:
                 sc, det = by_name[n]
-                boards[n] = crop_board(sc.points, rings[n], det, board, current)
+                boards[n] = crop_board(sc.points, rings[n], det, board, current, settings.margin(k))
+            # past the scheduled refinements, crop again until the crops hold the same points: a
+            # point on the tight crop's rim must not decide the answer by where the seed led
+            before, cropped = cropped, [b.indices.tobytes() if b.found else b"" for b in boards.values()]
+            if k >= settings.refinements and cropped == before:
+                break
             usable = [n for n, b in boards.items() if b.found]
             left_out = _disagreeing(current, frames_of(usable), board, settings)
             use = [n for n in usable if n not in left_out]

@@ -83,6 +83,16 @@ class TargetFrame:
         return float(np.sqrt(np.mean((self.points @ n - d) ** 2)))
 
     @cached_property
+    def normal_spread(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(T, C)``: a basis of the lidar plane (3, 2) and the covariance (2, 2) of the lidar
+        normal's tilt along it that the points' own scatter (``lidar_rms``) leaves: a board seen
+        on a few rings (its top above the lidar's highest beam, say) fixes its tilt across them
+        only to degrees; a whole board to a tenth of one."""
+        q = self.points - self.centroid
+        w, v = np.linalg.eigh(q.T @ q)  # ascending: v[:, 0] is the normal, the others span the plane
+        return v[:, 1:], self.lidar_rms**2 * np.diag(1.0 / np.maximum(w[1:], 1e-12))
+
+    @cached_property
     def centroid(self) -> np.ndarray:
         return self.points.mean(axis=0)
 
@@ -206,19 +216,24 @@ def _stack(x, start: Extrinsic, frames, board, use_edges):
       scan are the largest errors; measured on the dev sets: APS and E2VID images of one scan
       put the board up to 5 cm apart in depth);
     * its tilt: the lidar plane's normal against the camera's (2 components), over
-      ``FRAME_TILT_DEG`` (the two images of one scan disagree by up to 2 deg);
+      ``FRAME_TILT_DEG`` (the two images of one scan disagree by up to 2 deg) combined with what
+      the lidar's own scatter leaves of the plane's tilt (:attr:`TargetFrame.normal_spread`:
+      a board crossed by a few rings only is one sliver, its tilt across them loose by degrees);
     * its edges: each edge point's distance to the outline, soft-L1 at ``EDGE_SIGMA_M``, the
       frame's block over ``sqrt(m) * FRAME_EDGE_M``: the board's place within its plane, which
       the camera measures best (a pixel at 2 m is 6 mm at 346 px)."""
     R = _rodrigues(x[3:]) @ start.R
     t = start.translation + x[:3]
     out, groups = [], []
-    tilt = np.sin(np.radians(FRAME_TILT_DEG))
+    tilt2 = np.sin(np.radians(FRAME_TILT_DEG)) ** 2 * np.eye(2)
     for i, f in enumerate(frames):
         d = R @ f.lidar_normal - f.normal
-        Rb = f.pose_R
+        Rb = f.pose_R[:, :2]
+        T, C = f.normal_spread
+        M = Rb.T @ R @ T  # the lidar plane's tilt directions onto the camera board's axes
+        L = np.linalg.cholesky(tilt2 + M @ C @ M.T)
         mean = f.normal @ (R @ f.centroid + t) - f.offset  # the mean point-to-plane distance
-        out.append([mean / FRAME_PLANE_M, (d @ Rb[:, 0]) / tilt, (d @ Rb[:, 1]) / tilt])
+        out.append([mean / FRAME_PLANE_M, *np.linalg.solve(L, Rb.T @ d)])
         groups.append(np.full(3, i))
         if use_edges and len(f.edges):
             edge = _edge_residuals(R, t, f, board)
