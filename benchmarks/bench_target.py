@@ -2,7 +2,7 @@
 distance to the references, half-splits against the reported sigma, and time.
 
     PYTHONPATH=$PWD python benchmarks/bench_target.py [--realdata ../shared/realdata] [--runs 10] [--halves 10]
-        [--synthetic 3] [--calibration 30] [--floor 20] [--ablation 12] [--synth-dir DIR] [--sets NAMES]
+        [--synthetic 3] [--calibration 30] [--floor 20] [--ablation 12] [--lidars 8] [--synth-dir DIR] [--sets NAMES]
 
 Per set: ``--runs`` seeds 2 deg / 10 cm and as many 5 deg / 20 cm off the reference (uniform
 direction, that norm), the spread of the results (max distance to their median, mm / deg), how
@@ -12,7 +12,8 @@ results against each other; each against reference.yaml and lcecalib_estimate.ya
 the time for a whole run with detection, cold (no cache) and cached. ``--calibration N``: the
 reported sigma against the true error over N synthetic sequences per modality; ``--floor N``:
 the median error the lidar's noise allows (Cramer-Rao) against the solver's; ``--ablation N``:
-the solver with the true camera boards and with other residual-block scales.
+the solver with the true camera boards and with other residual-block scales; ``--lidars N``:
+N synthetic sequences per lidar model (16 to 128 beams).
 """
 
 from __future__ import annotations
@@ -50,14 +51,15 @@ def spread(exts: list[Extrinsic]) -> tuple[float, float]:
     return 1000 * max(m for _, m in d), max(g for g, _ in d)
 
 
-def synthetic_run(modality: str, k: int, folder: Path):
-    """``(truth, result)`` of the synthetic board sequence ``k`` of ``modality`` (written into
-    ``folder`` unless already there; None for the result when too few boards were found)."""
+def synthetic_run(modality: str, k: int, folder: Path, lidar: str = "vlp16"):
+    """``(truth, result)`` of the synthetic board sequence ``k`` of ``modality`` seen by ``lidar``
+    (written into ``folder`` unless already there; None for the result when too few boards were found)."""
     from l2e_studio.cli import main as cli
 
-    out = folder / f"{modality}{k}"
+    out = folder / (f"{modality}{k}" if lidar == "vlp16" else f"{modality}_{lidar}{k}")
     if not (out / "truth.yaml").is_file():
-        cli(["synth", "--target", "checkerboard", "--modality", modality, "--seed", str(k), "--out", str(out), "--quiet"])
+        cli(["synth", "--target", "checkerboard", "--modality", modality, "--lidar", lidar, "--seed", str(k),
+             "--out", str(out), "--quiet"])
     ss = load_scene_folder(out)
     truth, board = load_seed(out / "truth.yaml"), load_target(out / "target.yaml")
     try:
@@ -90,6 +92,31 @@ def synthetic(count: int, folder: Path) -> None:
         med = np.median(np.array(found), axis=0) if found else (np.nan, np.nan)
         print(f"      boards found {len(found)}/{total} ({100 * len(found) / max(total, 1):.0f} %), camera board pose "
               f"median error {med[0]:.1f} mm / {med[1]:.3f} deg against the truth")
+
+
+def lidars(count: int, folder: Path) -> None:
+    """The method on lidars the dev sets lack: ``count`` synthetic frame-camera sequences per
+    lidar model (``synth --lidar``): median and worst error against the truth, how many trusted,
+    and how many of the untrusted would have been wrong (off by more than the verdict's limits)."""
+    from l2e_studio.synth.board_world import LIDARS
+    from l2e_studio.target_verdict import ACCURACY_DEG, ACCURACY_M
+
+    print(f"== lidars ({count} synthetic frame-camera sequences each; error against the truth)")
+    for lidar in LIDARS:
+        errs, trusted, trusted_wrong = [], 0, 0
+        for k in range(count):
+            truth, r = synthetic_run("frame", k, folder, lidar)
+            if r is None:
+                continue
+            g, m = truth.error_to(r.extrinsic)
+            errs.append((1000 * m, g))
+            if judge_target(r).status == "trusted":
+                trusted += 1
+                trusted_wrong += m > ACCURACY_M or g > ACCURACY_DEG
+        e = np.array(errs)
+        print(f"   {lidar}: median {np.median(e[:, 0]):.2f} mm / {np.median(e[:, 1]):.3f} deg, worst {e[:, 0].max():.1f} mm / "
+              f"{e[:, 1].max():.2f} deg over {len(errs)}; trusted {trusted}, of them beyond {1000 * ACCURACY_M:.0f} mm / "
+              f"{ACCURACY_DEG:g} deg: {trusted_wrong}")
 
 
 def board_errors(out: Path) -> list:
@@ -243,6 +270,8 @@ def main() -> None:
                     help="synthetic frame sequences for the information floor (Cramer-Rao; 0: skip)")
     ap.add_argument("--ablation", type=int, default=0,
                     help="synthetic frame sequences for the ablation: detected vs true camera boards, block scales (0: skip)")
+    ap.add_argument("--lidars", type=int, default=0,
+                    help="synthetic frame sequences per lidar model (vlp16, hdl32, hdl64, os128; 0: skip)")
     ap.add_argument("--synth-dir", type=Path, default=None,
                     help="keep the synthetic sequences here and reuse those already written (default: a temporary folder)")
     ap.add_argument("--sets", default=",".join(SETS), help="comma-separated dev sets (default: all three; '' for none)")
@@ -257,6 +286,8 @@ def main() -> None:
             information_floor(args.floor, folder)
         if args.ablation:
             ablation(args.ablation, folder)
+        if args.lidars:
+            lidars(args.lidars, folder)
     results = {}
     for name in filter(None, args.sets.split(",")):
         folder = args.realdata / name

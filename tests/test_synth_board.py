@@ -128,6 +128,22 @@ def test_lidar_board_points_lie_on_the_true_plane_within_the_range_noise():
         assert np.count_nonzero(patch & (np.abs(others[:, 2]) < 0.005)) < 0.1 * on_board.sum()
 
 
+@pytest.mark.parametrize("lidar, rings, spacing_deg", [("hdl32", 32, 1.33), ("hdl64", 64, 0.43), ("os128", 128, 0.35)])
+def test_other_lidars_cross_the_board_with_their_own_rings(lidar, rings, spacing_deg):
+    """``TargetConfig(lidar=...)``: the board is crossed by that lidar's rings, as many as its
+    beam spacing gives over the board's height at its distance (within a factor of two: the board
+    is tilted and may stand partly above an HDL-64E's top beam), never the VLP-16's 16."""
+    config = TargetConfig(n_scenes=2, modality="e2vid", seed=4, lidar=lidar)
+    camera, truth, scenes = _scenes(config)
+    for _, points, _, ring, on_board, scene in scenes:
+        assert ring.max() < rings and np.unique(ring).size > 16
+        crossing = np.unique(ring[on_board]).size
+        expected = np.degrees(config.board.size_m[1] / np.linalg.norm(scene.pose_lidar.translation)) / spacing_deg
+        assert 3 <= crossing <= 2 * expected + 2, (crossing, expected)
+    with pytest.raises(ValueError, match="lidar must be one of"):
+        TargetConfig(lidar="hdl16")
+
+
 @pytest.mark.parametrize("modality", ["events", "events-moving"])
 def test_event_maps_fire_on_the_board_and_stay_quiet_elsewhere(modality):
     config = TargetConfig(n_scenes=1, modality=modality, seed=6)

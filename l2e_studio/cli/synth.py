@@ -47,6 +47,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                             "board (default: frame)")
     board.add_argument("--lens", choices=("radtan", "equidistant"), help="lens distortion model (default: radtan)")
     board.add_argument("--range-noise-m", type=float, help="lidar range noise (sigma, default 0.015 m)")
+    board.add_argument("--lidar", choices=("vlp16", "hdl32", "hdl64", "os128"),
+                       help="the spinning lidar's rings and azimuth step: Velodyne VLP-16, HDL-32E, HDL-64E, "
+                            "Ouster OS1-128 (default: vlp16)")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder (old scene_* files are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -84,7 +87,7 @@ def target_config_from_args(args: argparse.Namespace):
     return target_config_with(TargetConfig(), modality=args.modality, lens=args.lens, n_scenes=args.scenes,
                               width=args.width, height=args.height, seed=args.seed,
                               seed_error_deg=args.seed_error_deg, seed_error_m=args.seed_error_m,
-                              range_noise_m=args.range_noise_m)
+                              range_noise_m=args.range_noise_m, lidar=args.lidar)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -96,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
 
     err = Console(stderr=True)
     try:
-        board_only = [f"--{n.replace('_', '-')}" for n in ("modality", "lens", "range_noise_m") if getattr(args, n) is not None]
+        board_only = [f"--{n.replace('_', '-')}" for n in ("modality", "lens", "range_noise_m", "lidar") if getattr(args, n) is not None]
         if board_only and not args.target:
             raise ValueError(f"{board_only[0]} needs --target checkerboard")
         config = target_config_from_args(args) if args.target else config_from_args(args)

@@ -28,7 +28,7 @@ from ..errors import InputError
 from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 from .board import Board, pixel_rays
 from .board_views import IMAGE_MODALITIES, MODALITIES, render_view
-from .board_world import LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
+from .board_world import LIDARS, LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
 from .dataset import clear_out_dir, perturb, scene_stem
 
 LENSES = ("radtan", "equidistant")
@@ -53,12 +53,15 @@ class TargetConfig:
     seed_error_m: float = 0.05
     range_noise_m: float = 0.015
     camera_offset_m: tuple[float, float] = (0.05, 0.15)
+    lidar: str = "vlp16"
 
     def __post_init__(self) -> None:
         if self.modality not in MODALITIES:
             raise ValueError(f"modality must be one of {', '.join(MODALITIES)}")
         if self.lens not in LENSES:
             raise ValueError(f"lens must be one of {', '.join(LENSES)}")
+        if self.lidar not in LIDARS:
+            raise ValueError(f"lidar must be one of {', '.join(LIDARS)}")
         if self.n_scenes < 1:
             raise ValueError("need at least 1 scene")
         if (self.width or self.height) and (self.width < 64 or self.height < 48):
@@ -115,14 +118,14 @@ def make_target_scene(config: TargetConfig, index: int, camera: CameraModel, tru
     rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(2, 1, index)))
     board = config.board
     rays = pixel_rays(camera) if rays is None else rays
-    lidar = LidarModel(range_noise_m=config.range_noise_m)
+    lidar = LidarModel(range_noise_m=config.range_noise_m, **LIDARS[config.lidar])
     for _ in range(200):
         pose = board_pose(rng, index, config.n_scenes, config.distance_m, camera)
         if not board_in_view(board, camera, pose):
             continue
         scene = make_board_scene(rng, board, pose, truth)
         points, intensity, ring, on_board = lidar_scan(scene, board, lidar, rng)
-        rings_on_board = np.bincount(ring[on_board], minlength=16)
+        rings_on_board = np.bincount(ring[on_board], minlength=len(lidar.elevations_deg))
         if np.count_nonzero(rings_on_board >= 8) >= 3:
             break
     else:  # pragma: no cover - the pose ranges always leave room

@@ -33,6 +33,17 @@ class LidarModel:
     max_range_m: float = 100.0
 
 
+#: the spinning lidars a synthetic board sequence can be seen by: ring elevations (deg) and
+#: azimuth step (deg), after the data sheets (an HDL-64E looks mostly down: +2 to -24.9 deg, so a
+#: board held high is cut by its top beam)
+LIDARS = {
+    "vlp16": dict(elevations_deg=tuple(RING_ELEVATIONS_DEG), azimuth_step_deg=0.2),
+    "hdl32": dict(elevations_deg=tuple(np.linspace(-30.67, 10.67, 32)), azimuth_step_deg=0.16),
+    "hdl64": dict(elevations_deg=tuple(np.linspace(-24.9, 2.0, 64)), azimuth_step_deg=0.17),
+    "os128": dict(elevations_deg=tuple(np.linspace(-22.5, 22.5, 128)), azimuth_step_deg=0.35),
+}
+
+
 @dataclass
 class BoardScene:
     """One synthetic board scene: the world boxes, the board's box index and its true pose."""
