@@ -228,6 +228,36 @@ def test_a_board_seen_on_a_few_rings_has_a_loose_tilt_across_them():
     assert sd["sliver"].max() == pytest.approx(np.degrees(across), rel=0.1)
 
 
+def test_rings_are_told_from_the_elevations_of_a_dense_lidar_without_a_ring_field():
+    """A board 2.5 m away crossed by 12 rings 0.35 deg apart (an OS1-128; an HDL-64E's upper
+    block is 0.33 deg), range noise 1.5 cm, and no ring field (KITTI .bin, PLY, many bag
+    exports): every ring is told apart from the board points' elevations, and the board is found
+    with two edge points per ring (a 0.4 deg gap over the whole scan made them one ring and the
+    board was refused)."""
+    from l2e_studio.target import Detection
+    from l2e_studio.target.lidar import ring_ids
+
+    rng = np.random.default_rng(2)
+    el = np.radians(np.arange(12) * 0.35 - 2.0)[:, None]
+    az = np.radians(np.linspace(-8.0, 8.0, 150))[None, :]
+    rays = np.stack(np.broadcast_arrays(np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)), axis=-1).reshape(-1, 3)
+    rng_m = 2.5 / rays[:, 0] + rng.normal(0, 0.015, len(rays))  # a wall-like board 2.5 m ahead (lidar x forward)
+    pts = rays * rng_m[:, None]
+    truth_rings = np.repeat(np.arange(12), 150)
+    found = ring_ids(pts)
+    assert len(np.unique(found)) == 12
+    assert all(len(np.unique(found[truth_rings == r])) == 1 for r in range(12))
+    # the same points as a board in the scan, found without a ring field
+    board = Board("checkerboard", (9, 7), 0.07, (0.70, 0.22))  # 16 deg x 2.5 m wide, 12 rings high
+    to_cam = Extrinsic.from_rpy([-90.0, 0.0, -90.0], [0.0, 0.0, 0.0])  # lidar x forward -> camera z forward
+    centre = to_cam.transform(pts.mean(axis=0)[None])[0]
+    pose = Extrinsic(np.zeros(3), centre)
+    det = Detection("f", True, "", np.zeros((48, 2)), pose, 0.1, "test")
+    lb = crop_board(pts, None, det, board, to_cam)
+    assert lb.found, lb.reason
+    assert len(lb.edges) == 2 * 12
+
+
 realdata = pytest.mark.realdata
 
 

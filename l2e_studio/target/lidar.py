@@ -32,8 +32,11 @@ from .detect import Detection
 PLANE_TOL_M, PLANE_TOL_PER_M = 0.03, 0.005
 #: a board is at least this many points, on at least this many rings
 MIN_POINTS, MIN_RINGS = 20, 2
-#: elevation gap (deg) that separates two rings when the scan has no ring field
-RING_GAP_DEG = 0.4
+#: elevation gap (deg) that separates two rings when the scan has no ring field: the rings are
+#: told apart on the board's points alone, where a ring's points share one elevation to a few
+#: thousandths of a degree (one range, one beam origin) and rings are 0.1-2 deg apart (an OS1-128
+#: 0.35, an HDL-64E's upper block 0.33: a gap of 0.4 over the whole scan merged them into one)
+RING_GAP_DEG = 0.08
 
 
 @dataclass(frozen=True)
@@ -60,7 +63,8 @@ class LidarBoard:
 
 
 def ring_ids(points: np.ndarray, rings: np.ndarray | None = None) -> np.ndarray:
-    """A ring number per point: the scan's own ``rings`` when given, else elevation clusters."""
+    """A ring number per point: the scan's own ``rings`` when given, else elevation clusters
+    (meant for the points of one board: see ``RING_GAP_DEG``)."""
     if rings is not None and len(rings) == len(points):
         return np.asarray(rings).astype(np.int64)
     p = np.asarray(points, dtype=np.float64)
@@ -107,16 +111,19 @@ def edge_points(points: np.ndarray, rings: np.ndarray) -> tuple[np.ndarray, floa
     return np.asarray(out, dtype=np.float64).reshape(-1, 3), float(np.median(steps)) if steps else float("nan")
 
 
-def _finish(points: np.ndarray, rings: np.ndarray, idx: np.ndarray, what: str) -> LidarBoard:
-    """A :class:`LidarBoard` from the chosen indices, or the reason they do not make one."""
+def _finish(points: np.ndarray, rings: np.ndarray | None, idx: np.ndarray, what: str) -> LidarBoard:
+    """A :class:`LidarBoard` from the chosen indices (``rings``: the scan's ring field, or None to
+    tell them from the board points' elevations), or the reason they do not make one."""
     if len(idx) < MIN_POINTS:
         return LidarBoard(False, f"{what}: {len(idx)} points on the board (at least {MIN_POINTS})")
-    if len(np.unique(rings[idx])) < MIN_RINGS:
-        return LidarBoard(False, f"{what}: the board points lie on {len(np.unique(rings[idx]))} ring(s) "
-                                 f"(at least {MIN_RINGS})")
     pts = np.asarray(points[idx], dtype=np.float64)
+    ring = ring_ids(pts, None if rings is None else np.asarray(rings)[idx])
+    if len(np.unique(ring)) < MIN_RINGS:
+        return LidarBoard(False, f"{what}: the board points lie on {len(np.unique(ring))} ring(s) "
+                                 f"(at least {MIN_RINGS}" + ("" if rings is not None else
+                                 "; the scan has no ring field, and their elevations form no separate rings") + ")")
     n, d, rms = fit_plane(pts)
-    edges, step = edge_points(pts, rings[idx])
+    edges, step = edge_points(pts, ring)
     return LidarBoard(True, "", idx, pts, n, d, edges, rms, step)
 
 
@@ -134,7 +141,7 @@ def search_board(points: np.ndarray, rings: np.ndarray | None, detection: Detect
     if not detection.found:
         return LidarBoard(False, "no board in the image")
     p = np.asarray(points, dtype=np.float64)
-    ring = ring_ids(p, rings)
+    ring = rings if rings is not None and len(rings) == len(p) else None
     centre, n_pred = predicted(detection, seed)
     dist = float(np.linalg.norm(centre))
     radius = 0.5 * board.diagonal_m + seed_m + dist * np.tan(np.radians(seed_deg)) + 0.1
@@ -186,7 +193,7 @@ def crop_board(points: np.ndarray, rings: np.ndarray | None, detection: Detectio
     if not detection.found:
         return LidarBoard(False, "no board in the image")
     p = np.asarray(points, dtype=np.float64)
-    ring = ring_ids(p, rings)
+    ring = rings if rings is not None and len(rings) == len(p) else None
     centre, _ = predicted(detection, extrinsic)
     near = np.flatnonzero(np.sum((p - centre) ** 2, axis=1) <= (0.5 * board.diagonal_m + 2 * margin_m) ** 2)
     to_board = detection.pose.inverse().compose(extrinsic)  # lidar -> board frame
