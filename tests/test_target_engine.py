@@ -258,6 +258,31 @@ def test_rings_are_told_from_the_elevations_of_a_dense_lidar_without_a_ring_fiel
     assert len(lb.edges) == 2 * 12
 
 
+def test_a_solid_state_pattern_without_rings_gets_edges_along_the_boards_outline():
+    """A non-repetitive scan (a Livox-like rosette: every ray at its own elevation) of a board
+    2 m ahead, no ring field: no rings can be told apart, and the edge points are the points along
+    the convex hull of the board's points, all within a point spacing of the true outline."""
+    from l2e_studio.target import Detection
+
+    rng = np.random.default_rng(6)
+    to_cam = Extrinsic.from_rpy([-90.0, 0.0, -90.0], [0.0, 0.0, 0.0])  # lidar x forward -> camera z forward
+    pose = Extrinsic.from_rpy([0.0, 20.0, 10.0], [0.1, -0.05, 2.0])  # T_cam_board
+    to_lidar = to_cam.inverse().compose(pose)  # board -> lidar
+    w, h = BOARD.size_m[0] / 2, BOARD.size_m[1] / 2
+    q = np.column_stack([rng.uniform(-w, w, 3000), rng.uniform(-h, h, 3000), np.zeros(3000)])
+    pts = to_lidar.transform(q)
+    pts += pts / np.linalg.norm(pts, axis=1, keepdims=True) * rng.normal(0, 0.01, (len(pts), 1))
+    det = Detection("f", True, "", np.zeros((48, 2)), pose, 0.1, "test")
+    lb = crop_board(pts, None, det, BOARD, to_cam)
+    assert lb.found, lb.reason
+    board_xy = to_lidar.inverse().transform(lb.edges)[:, :2]
+    from l2e_studio.target.solve import outline_distance
+
+    d = outline_distance(board_xy, BOARD)
+    assert len(lb.edges) >= 40 and np.all(d > -0.03) and np.all(d < 0.01), (len(lb.edges), d.min(), d.max())
+    assert 0 < lb.azimuth_step_rad < np.radians(1.0)
+
+
 realdata = pytest.mark.realdata
 
 

@@ -14,7 +14,9 @@ Two ways, used in turn by :func:`l2e_studio.target.calibrate_target`:
 
 Edge points are where each ring enters and leaves the board (the first and last point of the
 ring on the board by azimuth). Rings come from the scan's ``ring`` field when it has one, else
-from the points' elevation angles (split where consecutive elevations jump).
+from the board points' elevation angles (split where consecutive elevations jump); a board whose
+points form no rings at all (a solid-state lidar's non-repetitive pattern) gets the points along
+the convex hull of its points instead (:func:`outline_points`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ MIN_POINTS, MIN_RINGS = 20, 2
 #: thousandths of a degree (one range, one beam origin) and rings are 0.1-2 deg apart (an OS1-128
 #: 0.35, an HDL-64E's upper block 0.33: a gap of 0.4 over the whole scan merged them into one)
 RING_GAP_DEG = 0.08
+#: the widest elevation band one ring's points on a board may span (deg)
+RING_WIDTH_DEG = 0.3
 
 
 @dataclass(frozen=True)
@@ -111,6 +115,35 @@ def edge_points(points: np.ndarray, rings: np.ndarray) -> tuple[np.ndarray, floa
     return np.asarray(out, dtype=np.float64).reshape(-1, 3), float(np.median(steps)) if steps else float("nan")
 
 
+def _ring_like(points: np.ndarray, ring: np.ndarray) -> bool:
+    """Whether elevation clusters ``ring`` of a board's points are rings: at least
+    ``MIN_RINGS`` of them, each a thin band of elevation (a spinning lidar's beam), not a
+    scatter over the board split only where its sparse tips leave gaps."""
+    ids = np.unique(ring)
+    if len(ids) < MIN_RINGS:
+        return False
+    elev = np.degrees(np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1])))
+    return all(np.ptp(elev[ring == r]) <= RING_WIDTH_DEG for r in ids)
+
+
+def outline_points(points: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(edges, step)`` of a board seen without rings (a solid-state lidar's non-repetitive
+    pattern, or a cloud whose rings cannot be told apart): the points within one point spacing
+    of the convex hull of the points in their plane (the board is convex, and a dense pattern
+    fills it to within a spacing of its outline), and that spacing as an angle at the board's
+    range (rad), the edge points' uncertainty along the outline."""
+    from scipy.spatial import cKDTree
+
+    u = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    xy = np.column_stack([points @ u, points @ np.cross(normal, u)]).astype(np.float32)
+    spacing = float(np.median(cKDTree(xy).query(xy, k=2)[0][:, 1]))
+    hull = cv2.convexHull(xy)
+    inside = np.array([cv2.pointPolygonTest(hull, (float(a), float(b)), True) for a, b in xy])
+    edges = points[inside <= spacing]
+    return edges, spacing / max(float(np.linalg.norm(points.mean(axis=0))), 1e-6)
+
+
 def _finish(points: np.ndarray, rings: np.ndarray | None, idx: np.ndarray, what: str) -> LidarBoard:
     """A :class:`LidarBoard` from the chosen indices (``rings``: the scan's ring field, or None to
     tell them from the board points' elevations), or the reason they do not make one."""
@@ -118,12 +151,11 @@ def _finish(points: np.ndarray, rings: np.ndarray | None, idx: np.ndarray, what:
         return LidarBoard(False, f"{what}: {len(idx)} points on the board (at least {MIN_POINTS})")
     pts = np.asarray(points[idx], dtype=np.float64)
     ring = ring_ids(pts, None if rings is None else np.asarray(rings)[idx])
-    if len(np.unique(ring)) < MIN_RINGS:
-        return LidarBoard(False, f"{what}: the board points lie on {len(np.unique(ring))} ring(s) "
-                                 f"(at least {MIN_RINGS}" + ("" if rings is not None else
-                                 "; the scan has no ring field, and their elevations form no separate rings") + ")")
+    ringless = rings is None and not _ring_like(pts, ring)  # a scan pattern without rings (solid state)
+    if len(np.unique(ring)) < MIN_RINGS and not ringless:
+        return LidarBoard(False, f"{what}: the board points lie on {len(np.unique(ring))} ring(s) (at least {MIN_RINGS})")
     n, d, rms = fit_plane(pts)
-    edges, step = edge_points(pts, ring)
+    edges, step = outline_points(pts, n) if ringless else edge_points(pts, ring)
     return LidarBoard(True, "", idx, pts, n, d, edges, rms, step)
 
 
