@@ -134,9 +134,7 @@ def outline_points(points: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, 
     range (rad), the edge points' uncertainty along the outline."""
     from scipy.spatial import cKDTree
 
-    u = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    xy = np.column_stack([points @ u, points @ np.cross(normal, u)]).astype(np.float32)
+    xy = _in_plane(points, normal)
     spacing = float(np.median(cKDTree(xy).query(xy, k=2)[0][:, 1]))
     hull = cv2.convexHull(xy)
     inside = np.array([cv2.pointPolygonTest(hull, (float(a), float(b)), True) for a, b in xy])
@@ -288,12 +286,16 @@ def _patches(p: np.ndarray, link: float) -> list[np.ndarray]:
     return sorted(groups, key=len, reverse=True)
 
 
-def _extent(p: np.ndarray, n: np.ndarray) -> tuple[float, float, float]:
-    """(length, width, area) of the points' minimum-area rectangle and convex hull in their plane."""
+def _in_plane(p: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(N, 2) float32 coordinates of the points ``p`` in a basis of the plane with normal ``n``."""
     u = np.cross(n, [0.0, 0.0, 1.0] if abs(n[2]) < 0.9 else [1.0, 0.0, 0.0])
     u /= np.linalg.norm(u)
-    v = np.cross(n, u)
-    xy = np.column_stack([p @ u, p @ v]).astype(np.float32)
+    return np.column_stack([p @ u, p @ np.cross(n, u)]).astype(np.float32)
+
+
+def _extent(p: np.ndarray, n: np.ndarray) -> tuple[float, float, float]:
+    """(length, width, area) of the points' minimum-area rectangle and convex hull in their plane."""
+    xy = _in_plane(p, n)
     (_, _), (a, b), _ = cv2.minAreaRect(xy)
     hull = cv2.convexHull(xy)
     return float(max(a, b)), float(min(a, b)), float(cv2.contourArea(hull))

@@ -68,9 +68,21 @@ class TargetFrame:
         return -n if n @ self.pose.translation > 0 else n
 
     @cached_property
+    def scatter(self) -> tuple[np.ndarray, np.ndarray]:
+        """Eigenvalues (ascending) and eigenvectors of the lidar points' scatter about their
+        centroid: the weakest axis is the plane's normal, the others span it (one eigen-
+        decomposition for :attr:`lidar_plane` and :attr:`normal_spread`; as the SVD's, at a
+        third of its cost)."""
+        q = self.points - self.centroid
+        return np.linalg.eigh(q.T @ q)
+
+    @cached_property
     def lidar_plane(self) -> tuple[np.ndarray, float]:
         """The lidar points' plane ``n . p = d`` (lidar frame, n towards the sensor)."""
-        return _plane(self.points)
+        n, c = self.scatter[1][:, 0], self.centroid
+        if n @ c > 0:
+            n = -n
+        return n, float(n @ c)
 
     @property
     def lidar_normal(self) -> np.ndarray:
@@ -88,8 +100,7 @@ class TargetFrame:
         normal's tilt along it that the points' own scatter (``lidar_rms``) leaves: a board seen
         on a few rings (its top above the lidar's highest beam, say) fixes its tilt across them
         only to degrees; a whole board to a tenth of one."""
-        q = self.points - self.centroid
-        w, v = np.linalg.eigh(q.T @ q)  # ascending: v[:, 0] is the normal, the others span the plane
+        w, v = self.scatter
         return v[:, 1:], self.lidar_rms**2 * np.diag(1.0 / np.maximum(w[1:], 1e-12))
 
     @cached_property
@@ -163,7 +174,7 @@ def closed_form(frames: list[TargetFrame], fallback: Extrinsic) -> Extrinsic:
     """The extrinsic from the planes alone: rotation by SVD of the normal pairs, translation by
     linear least squares on the offsets (held weakly to ``fallback``'s along directions the
     normals do not span; the rotation is ``fallback``'s when the normals span too little)."""
-    lidar = [_plane(f.points) for f in frames]
+    lidar = [f.lidar_plane for f in frames]
     nc = np.array([f.normal for f in frames])
     nl = np.array([n for n, _ in lidar])
     dl = np.array([d for _, d in lidar])
@@ -176,15 +187,6 @@ def closed_form(frames: list[TargetFrame], fallback: Extrinsic) -> Extrinsic:
     b = np.concatenate([np.array([f.offset for f in frames]) - dl, 0.05 * fallback.translation])
     t = np.linalg.lstsq(A, b, rcond=None)[0]
     return Extrinsic(Rotation.from_matrix(R).as_rotvec(), t)
-
-
-def _plane(points: np.ndarray) -> tuple[np.ndarray, float]:
-    c = points.mean(axis=0)
-    q = points - c
-    n = np.linalg.eigh(q.T @ q)[1][:, 0]  # the scatter's weakest axis (as the SVD's last, at a third of its cost)
-    if n @ c > 0:
-        n = -n
-    return n, float(n @ c)
 
 
 def normal_spread(normals: np.ndarray) -> tuple[float, np.ndarray]:
