@@ -51,6 +51,7 @@ MIN_USED = 6
 MIN_BOARD_IMAGES = 3  # boards in fewer images are no evidence either way
 BOARD_CHECK_DEG, BOARD_CHECK_M = 0.5, 0.03  # the least disagreement with the boards' own solution that fails a result
 BOARD_SIGMAS = 3.76  # sqrt of the chi-square(3 dof) 99.7 % quantile: a disagreement past it is not the boards' noise
+BOARD_AWAY_SIGMAS = 1.0  # a result further from the boards than its seed by more than this (in their sigmas) moved away from them
 BOARDS_ALONE = TargetSettings(leave_one_out=False)  # the target method as evidence: no leave-one-out needed
 BOARD_LOOSE_DEG = 3.0  # boards whose own rotation is looser (3 sigma, about every axis) than this cannot tell
 NOISE_QUANTILE = 0.99  # the residuals' bound under the error model: their chi-square quantile
@@ -147,31 +148,51 @@ def uncertainty_check(sigma_m: np.ndarray, sigma_deg: np.ndarray, n_frames: int)
                  f"(limits {1000 * ACCURACY_M:.0f} mm, {ACCURACY_DEG:g} deg)")
 
 
-def board_check(extrinsic: Extrinsic, boards: CalibrationResult, rotation_only: bool = False) -> Check | None:
+def board_check(extrinsic: Extrinsic, boards: CalibrationResult, rotation_only: bool = False,
+                seed: Extrinsic | None = None) -> Check | None:
     """Whether ``boards`` (the target method's own result on the same scenes) agrees with
     ``extrinsic`` (any calibration, e.g. a targetless result): its rotation and, unless
     ``rotation_only`` (a result whose translation is the seed's), its translation each within
     ``BOARD_CHECK_DEG`` / ``BOARD_CHECK_M`` or within ``BOARD_SIGMAS`` of the boards' own
     per-axis uncertainty (the 99.7 % bound of a 3-D normal). Evidence the targetless optimiser
     never climbed. None when the boards cannot tell: too few frames used, or their own
-    rotation looser than ``BOARD_LOOSE_DEG`` about every axis."""
+    rotation looser than ``BOARD_LOOSE_DEG`` about every axis.
+
+    The floor is for the boards' own bias (their σ counts only their noise), which a ``seed``
+    shares: a result past ``BOARD_SIGMAS`` that sits more than ``BOARD_AWAY_SIGMAS`` further
+    from the boards than its seed moved away from independent evidence, and fails under the
+    floor too."""
     detail = boards.target
     sd_m, sd_deg = np.asarray(detail.sigma_m, float), np.asarray(detail.sigma_deg, float)
     n = len(detail.used)
     if n < MIN_BOARD_IMAGES or boards.cancelled or not np.all(np.isfinite(np.r_[sd_m, sd_deg])) \
             or 3 * float(np.min(sd_deg)) > BOARD_LOOSE_DEG:
         return None
-    dt, dw = boards.extrinsic.delta_to(extrinsic)
-    deg, m = float(np.degrees(np.linalg.norm(dw))), float(np.linalg.norm(dt))
-    k_rot = float(np.linalg.norm(np.degrees(dw) / np.maximum(sd_deg, 1e-9)))
-    k_t = float(np.linalg.norm(dt / np.maximum(sd_m, 1e-12)))
-    rot_ok = deg <= BOARD_CHECK_DEG or k_rot <= BOARD_SIGMAS
-    t_ok = rotation_only or m <= BOARD_CHECK_M or k_t <= BOARD_SIGMAS
+
+    def off(ext: Extrinsic) -> tuple[float, float, float, float]:
+        """(deg, m, rotation sigmas, translation sigmas) of ``ext`` from the boards' solution."""
+        dt, dw = boards.extrinsic.delta_to(ext)
+        return (float(np.degrees(np.linalg.norm(dw))), float(np.linalg.norm(dt)),
+                float(np.linalg.norm(np.degrees(dw) / np.maximum(sd_deg, 1e-9))),
+                float(np.linalg.norm(dt / np.maximum(sd_m, 1e-12))))
+
+    deg, m, k_rot, k_t = off(extrinsic)
+    _, _, k_rot0, k_t0 = off(seed) if seed is not None else (0.0, 0.0, np.inf, np.inf)
+    away_rot = k_rot > BOARD_SIGMAS and k_rot - k_rot0 > BOARD_AWAY_SIGMAS
+    away_t = not rotation_only and k_t > BOARD_SIGMAS and k_t - k_t0 > BOARD_AWAY_SIGMAS
+    rot_ok = (deg <= BOARD_CHECK_DEG or k_rot <= BOARD_SIGMAS) and not away_rot
+    t_ok = rotation_only or ((m <= BOARD_CHECK_M or k_t <= BOARD_SIGMAS) and not away_t)
     moved = "" if rotation_only else f", its translation {100 * m:.1f} cm ({k_t:.1f} sigma)"
+    away = ""
+    if away_rot or away_t:
+        away = "; further from them than the seed (" + ", ".join(
+            [f"rotation {k_rot0:.1f} -> {k_rot:.1f} sigma"] * away_rot
+            + [f"translation {k_t0:.1f} -> {k_t:.1f} sigma"] * away_t) + "): it moved away from the boards"
     return Check("boards agree", bool(rot_ok and t_ok),
                  f"the boards alone ({n} frames) put the rotation {deg:.2f} deg ({k_rot:.1f} sigma of "
                  f"theirs){moved} from the one handed back (limits {BOARD_CHECK_DEG:g} deg"
-                 + ("" if rotation_only else f" / {100 * BOARD_CHECK_M:g} cm") + f" or {BOARD_SIGMAS:.1f} sigma)")
+                 + ("" if rotation_only else f" / {100 * BOARD_CHECK_M:g} cm") + f" or {BOARD_SIGMAS:.1f} sigma)"
+                 + away)
 
 
 def with_boards(verdict: Verdict, seed: Extrinsic, scenes: Sequence[Scene], camera: CameraModel, board: Board,
@@ -185,5 +206,5 @@ def with_boards(verdict: Verdict, seed: Extrinsic, scenes: Sequence[Scene], came
         boards = calibrate_target(scenes, camera, verdict.extrinsic, board, BOARDS_ALONE, detections=detections)
     except InputError:  # the board in fewer than 3 frames of both sensors: nothing to tell
         return verdict
-    check = board_check(verdict.extrinsic, boards, rotation_only=verdict.status == "trusted-rotation")
+    check = board_check(verdict.extrinsic, boards, rotation_only=verdict.status == "trusted-rotation", seed=seed)
     return verdict if check is None else with_check(verdict, check, seed, on_untrusted)

@@ -471,6 +471,14 @@ def test_boards_overrule_a_trusted_targetless_verdict_that_disagrees(synth_board
         == "trusted-rotation"
     seed_kept = with_boards(verdict("not-trusted", ss.seed), ss.seed, ss.scenes, ss.camera, board, dets)
     assert seed_kept.status == "not-trusted" and seed_kept.checks[-1].name == "boards agree"  # listed, for the user
+    # under the 0.5 deg floor but past 3.76 of the boards' sigmas: passes from a seed further off (the boards'
+    # bias, shared by the seed, is what the floor forgives), fails from a seed at the truth (it moved away)
+    near = truth.perturbed([0, 0, 0], np.radians([0.45, 0, 0]))
+    far_seed = truth.perturbed([0, 0, 0], np.radians([0, 1.0, 0]))
+    assert with_boards(verdict("trusted-rotation", near), far_seed, ss.scenes, ss.camera, board, dets).status \
+        == "trusted-rotation"
+    away = with_boards(verdict("trusted-rotation", near), truth, ss.scenes, ss.camera, board, dets)
+    assert away.status == "not-trusted" and away.extrinsic is truth and "moved away from the boards" in away.reasons[-1], away.checks[-1].detail
 
 
 def test_calibrate_targetless_with_a_board_in_view_checks_the_boards(synth_boards, tmp_path, capsys):
