@@ -88,7 +88,12 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
                                  opt_deg=oe[0], opt_m=oe[1], move_deg=move[0], move_m=move[1],
                                  spread_deg=None if spread is None else spread.deg,
                                  spread_m=None if spread is None or np.isnan(spread.m) else spread.m,
-                                 settled=getattr(v, "settled", "") if variant == "new" else ""))
+                                 settled=getattr(v, "settled", "") if variant == "new" else "",
+                                 # for studying the verdict's rules offline: each check's outcome, each
+                                 # axis's probe drop, and the optimiser's translation error per camera axis
+                                 checks={c.name: c.passed for c in v.checks} if variant == "new" else {},
+                                 drops=[a.drop for a in v.translation] if variant == "new" else [],
+                                 opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist()))
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
                       f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "
                       f"(optimiser {oe[0]:.2f}/{100 * oe[1]:.1f})", flush=True)
