@@ -268,7 +268,9 @@ def judge(
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
         steps.next("translation probes: the result moved 5 cm along x, y, z")
-        axes = translation_axes(translation_drops(final, res, final.score(res, per_scene=False)[0]), final.objective_name)
+        # on as many points as the final stage climbed on (all of them on every real dev rig)
+        probed = final.thinned(settings.schedule(final.camera.width, final.camera.height)[-1].max_points)
+        axes = translation_axes(translation_drops(probed, res, probed.score(res, per_scene=False)[0]), final.objective_name)
         need = OBSERVABLE_DROP[final.objective_name]
         checks.append(Check("translation observable (translation)", all(a.pinned for a in axes),
                             f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
