@@ -268,7 +268,8 @@ def judge(
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
         steps.next("translation probes: the result moved 5 cm along x, y, z")
-        # on as many points as the final stage climbed on (all of them on every real dev rig)
+        # the stack evenly thinned to the final stage's point budget (the budget counts points in
+        # the image, this the whole stack: fewer in the image; every point on every real dev rig)
         probed = final.thinned(settings.schedule(final.camera.width, final.camera.height)[-1].max_points)
         axes = translation_axes(translation_drops(probed, res, probed.score(res, per_scene=False)[0]), final.objective_name)
         need = OBSERVABLE_DROP[final.objective_name]
