@@ -227,11 +227,15 @@ def test_a_rival_peak_nearly_as_high_makes_the_answer_ambiguous():
 def test_translation_axes_name_what_to_record() -> None:
     from l2e_studio.verdict import AXIS_ADVICE, translation_axes
 
-    axes = translation_axes(np.array([0.4, 0.15, 0.01]), "edges")
+    axes = translation_axes(np.array([0.4, 0.15, 0.01]), "edges", 3)
     assert [a.pinned for a in axes] == [True, True, False]
     z = axes[2]
     assert z.line().startswith("z is not pinned") and AXIS_ADVICE["z"] in z.line()
     assert "left and right edges" in z.line()
+    # one scene pins no axis, however much a move costs: its translation trades against its rotation
+    one = translation_axes(np.array([0.4, 0.15, 0.01]), "edges", 1)
+    assert not any(a.pinned for a in one) and one[0].drop == 0.4
+    assert "one scene cannot pin" in one[0].line() and "record more scenes" in one[0].line()
 
 
 def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
@@ -254,7 +258,7 @@ def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
 def test_a_verdict_says_which_axes_come_from_the_seed_and_what_to_record() -> None:
     from l2e_studio.verdict import Verdict, translation_axes
 
-    axes = translation_axes(np.array([0.3, 0.2, 0.04]), "edges")
+    axes = translation_axes(np.array([0.3, 0.2, 0.04]), "edges", 2)
     v = Verdict("trusted-rotation", Extrinsic(np.zeros(3), np.zeros(3)), False, ("r",), (), 0.0, axes, "z")
     assert "translation along x, y trusted" in v.summary() and "along z" in v.summary()
     d = v.to_dict()
@@ -275,3 +279,29 @@ def test_outside_evidence_that_fails_hands_back_the_seed() -> None:
     bad = with_check(v, Check("boards agree", False, "9.0 cm RMS"), seed)
     assert bad.status == "not-trusted" and bad.kept_seed and bad.extrinsic is seed
     assert bad.reasons == ("boards agree: 9.0 cm RMS",)
+
+
+def test_one_scene_is_split_into_strips_and_never_hands_back_its_own_translation() -> None:
+    """A single scan's halves are alternate vertical strips (each keeps the image's width, no point
+    shared), and whatever its checks say, its translation is the seed's: one scene pins no axis."""
+    from l2e_studio.evidence import HALF_STRIPS, halves
+
+    scene, cam, truth = _box_world(np.random.default_rng(3))
+    settings = CalibrationSettings()
+    seed = truth.perturbed(np.array([0.03, -0.02, 0.02]), np.radians([1.0, -1.0, 0.5]))
+    stack = stack_scenes([scene], cam, seed, settings)
+    a, b = halves(stack, truth)
+    assert not (a & b).any() and (a | b).all()
+    uv, inside = stack.project(truth)
+    for half in (a, b):  # both halves reach across the image (a left or right half spans at most its half)
+        u = uv[half & inside, 0]
+        assert u.max() - u.min() > 0.75 * cam.width
+        assert len(np.unique(np.floor(u * HALF_STRIPS / cam.width))) == HALF_STRIPS // 2
+    result = calibrate(stack, None, seed, settings)
+    assert result.extrinsic.error_to(truth)[0] < 0.6 * seed.error_to(truth)[0]
+    verdict = judge(stack, result, settings)
+    # the rotation's checks pass; the optimiser's translation is 11 cm off here, the seed's 4 cm
+    assert verdict.status == "trusted-rotation", verdict.reasons
+    assert all(a.one_scene and not a.pinned for a in verdict.translation)
+    assert verdict.seed_axes == "xyz" and np.array_equal(verdict.extrinsic.translation, seed.translation)
+    assert verdict.extrinsic.error_to(truth)[0] < seed.error_to(truth)[0]
