@@ -224,7 +224,6 @@ class AxisPinned:
         text = f"{self.axis} is {state} (moving {100 * PROBE_M:.0f} cm costs {100 * self.drop:.0f} % of the score"
         if self.one_scene:
             text += ", but one scene cannot pin a translation"
-            return f"{text}): record more scenes; {AXIS_ADVICE[self.axis]}"
         return f"{text})" if self.pinned else f"{text}): {AXIS_ADVICE[self.axis]}"
 
 
