@@ -283,3 +283,32 @@ def test_frames_fit_the_byte_budget_at_the_best_quality_or_smaller():
     assert cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR).shape == img.shape
     hinted, _, _ = jpeg_within(noise, 60_000, REST_QUALITIES, width=img.shape[1])
     assert hinted.shape[1] == img.shape[1]  # the width that fitted last time: no wider attempt first
+
+
+def test_busy_workers_are_waited_for_against_one_deadline_not_one_timeout_each() -> None:
+    """Five workers each stuck in a job: told to stop together and joined by one deadline, they
+    are let go in about that time (one timeout each in turn would take five times as long); a
+    job that ends in time is waited for."""
+    import threading as th
+    import time as tm
+
+    from l2e_studio.app.workers import LatestWorker, join_by
+
+    release, started = th.Event(), []
+    stuck = [LatestWorker(f"stuck-{k}", lambda: (started.append(1), release.wait(30))) for k in range(5)]
+    for w in stuck:
+        w.poke()
+    deadline = tm.monotonic() + 10
+    while len(started) < 5 and tm.monotonic() < deadline:
+        tm.sleep(0.01)
+    assert len(started) == 5
+    for w in stuck:
+        w.request_stop()
+    t0 = tm.monotonic()
+    join_by(stuck, t0 + 1.0)
+    waited = tm.monotonic() - t0
+    assert 0.9 <= waited < 3.0, waited  # (in turn: 5 s)
+    assert all(w._thread.is_alive() for w in stuck)  # still in their jobs: daemons, let go
+    release.set()
+    join_by(stuck, tm.monotonic() + 10)
+    assert not any(w._thread.is_alive() for w in stuck)  # each stopped after its job

@@ -43,11 +43,12 @@ from .readout import MiReading, MiReadout
 from .maps import EventMapSession
 from .state import SessionState
 from .runs import CHECKERBOARD, METHOD_NAMES, Runner, checkerboard, targetless
-from .workers import LatestWorker, Settle
+from .workers import LatestWorker, Settle, join_by
 
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
+STOP_S = 5.0  # App.stop: every thread and a run in progress get this long, all together
 #: s without a change before the frame at rest replaces the preview (key auto-repeat and drags
 #: send a change every 16-50 ms; a person nudging pauses longer). The frame at rest should be
 #: painted within 400 ms of the input: this leaves ~250 ms to draw, encode, send and paint it.
@@ -454,17 +455,20 @@ class App:
                 log.debug("notification to a closing client failed", exc_info=True)
 
     # --- shutdown -------------------------------------------------------------------------------------
-    def stop(self) -> None:
+    def stop(self, timeout: float = STOP_S) -> None:
+        """Stop the app's threads and its server in about ``timeout`` seconds, however busy: a
+        run is cancelled (its result file still written), every worker told to stop at once,
+        then all are waited for against one deadline (not ``timeout`` each in turn: a Ctrl-C
+        on a busy app had taken past 20 s)."""
         self.cancel_run()
-        self.wait_run(5.0)
-        self.overlay_settle.stop()
-        self.pose_settle.stop()
-        self.table_settle.stop()
-        self.maps.rebuilder.wait(5.0)
-        self.target.stop()
-        for worker in (self.overlay_worker, self.mi_worker, self.compare_worker, self.scene_3d_worker,
-                       self.recording_worker):
-            worker.stop()
+        threads = (self.overlay_settle, self.pose_settle, self.table_settle, self.target.worker, self.overlay_worker,
+                   self.mi_worker, self.compare_worker, self.scene_3d_worker, self.recording_worker)
+        for t in threads:
+            t.request_stop()
+        deadline = time.monotonic() + timeout
+        self.wait_run(max(0.0, deadline - time.monotonic()))
+        self.maps.rebuilder.wait(max(0.0, deadline - time.monotonic()))
+        join_by(threads, deadline)
         self.server.stop()
 
 

@@ -4,6 +4,7 @@ A :class:`LatestWorker` runs one job function whenever it is poked; pokes that a
 is busy collapse into one more run, so a fast slider drag never queues up stale frames -- the
 view always catches up with the latest state. A :class:`Ticker` calls a function at a fixed
 rate while a condition holds (used to throttle progress updates during a run).
+:func:`join_by` waits for several against one deadline.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Callable
+from typing import Callable, Protocol, Sequence
 
 log = logging.getLogger(__name__)
 
@@ -46,10 +47,17 @@ class LatestWorker:
         """Block until no run is pending (tests and shutdown)."""
         return self._idle.wait(timeout)
 
-    def stop(self) -> None:
+    def request_stop(self) -> None:
+        """Stop after the current run (if any); returns at once."""
         self._stop = True
         self._wake.set()
-        self._thread.join(timeout=5.0)
+
+    def join(self, timeout: float | None = None) -> None:
+        self._thread.join(timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self.request_stop()
+        self.join(timeout)
 
     def _loop(self) -> None:
         while True:
@@ -127,11 +135,18 @@ class Settle:
             self._armed = True
             self._cond.notify()
 
-    def stop(self) -> None:
+    def request_stop(self) -> None:
+        """Stop after the current job (if any); returns at once."""
         with self._cond:
             self._stop = True
             self._cond.notify()
-        self._thread.join(timeout=5.0)
+
+    def join(self, timeout: float | None = None) -> None:
+        self._thread.join(timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self.request_stop()
+        self.join(timeout)
 
     def _loop(self) -> None:
         while True:
@@ -149,3 +164,15 @@ class Settle:
                 self._job()
             except Exception:
                 log.exception("settle job failed")
+
+
+class _Joinable(Protocol):
+    def join(self, timeout: float | None = None) -> None: ...
+
+
+def join_by(threads: Sequence[_Joinable], deadline: float) -> None:
+    """Wait for ``threads`` until the ``time.monotonic()`` ``deadline`` at the latest, all
+    together: a busy app stops by then, not after a timeout per thread in turn (the threads
+    are daemons: one still busy then does not hold the process)."""
+    for t in threads:
+        t.join(max(0.0, deadline - time.monotonic()))

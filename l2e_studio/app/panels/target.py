@@ -364,5 +364,3 @@ class TargetPanel:
         self.cloud.colors = np.tile(np.array(BOARD_POINT_RGB, np.uint8), (len(v.board_indices), 1))
         self.cloud.visible = True
 
-    def stop(self) -> None:
-        self.worker.stop()
