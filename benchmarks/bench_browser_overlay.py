@@ -175,12 +175,12 @@ class Page:
         while time.monotonic() < deadline:
             painted = self.page.evaluate("() => window.__b ? window.__b.frames.map(f => [f[0], f[3]]) : null")
             if painted is None:  # not observing yet: the server's frame at rest will do
-                if self.app.overlay_worker.wait_idle(0) and self.app.overlay.rest_frame:
+                if self.app.views.overlay_worker.wait_idle(0) and self.app.overlay.rest_frame:
                     break
             elif any((f := self.sent(sha, t)) is not None and f[3] and f[1] >= version for t, sha in painted):
                 break
             time.sleep(0.03)
-        self.app.mi_worker.wait_idle(60)
+        self.app.views.mi_worker.wait_idle(60)
         time.sleep(extra)
 
     def focus_slider(self) -> None:
@@ -376,7 +376,7 @@ def main() -> None:
                         url = f"http://127.0.0.1:{proxies[delay].port}"
                     run_one(browser, app, log, url, viewport, delay, args)
             browser.close()
-        srv = np.array(app.overlay_seconds[-100:]) * 1e3
+        srv = np.array(app.views.overlay_seconds[-100:]) * 1e3
         print(f"\nserver render+encode per frame: median {np.median(srv):.0f} ms, p95 {np.percentile(srv, 95):.0f} ms")
     finally:
         for proxy in proxies.values():

@@ -181,8 +181,8 @@ def app_latency(camera, pts, intensity, event_map, seed, repeats: int, n_scenes:
         port = s.getsockname()[1]
     app = build_app(SceneSet(tmp, camera, seed, scenes), port=port, out_dir=tmp / "results")
     try:
-        app.overlay_worker.wait_idle(30)
-        app.mi_worker.wait_idle(60)
+        app.views.overlay_worker.wait_idle(30)
+        app.views.mi_worker.wait_idle(60)
         print(f"through the app ({n_scenes} scenes loaded, MI readout live): slider -> frame handed to viser; "
               f"-> readout computed (median / p95 ms)")
         for window in (1366, 1920):
@@ -192,16 +192,16 @@ def app_latency(camera, pts, intensity, event_map, seed, repeats: int, n_scenes:
                 for i in range(repeats):
                     frames = app.overlay.frames
                     sliders = np.concatenate([seed.translation + 0.001 * (i % 7), (0.05 * i, -0.03 * i, 0.02 * i)])
-                    app._want_rest = rest  # the next frame is the one at rest (as once the input rests)
+                    app.views._want_rest = rest  # the next frame is the one at rest (as once the input rests)
                     t0 = time.perf_counter()
                     app.set_extrinsic(extrinsic_from_sliders(sliders, seed), source="sliders")
                     while app.overlay.frames == frames:
                         time.sleep(0.0005)
                     frame.append(time.perf_counter() - t0)
-                    app.mi_worker.wait_idle(30)  # one slider step at a time, as a person moves it
+                    app.views.mi_worker.wait_idle(30)  # one slider step at a time, as a person moves it
                     readout.append(time.perf_counter() - t0)
                     time.sleep(0.3)  # the frame at rest and the table follow; then the next step
-                    app.overlay_worker.wait_idle(10)
+                    app.views.overlay_worker.wait_idle(10)
                 f, r = np.array(frame[2:]) * 1e3, np.array(readout[2:]) * 1e3
                 print(f"  {window} px window, frame {app.overlay.display_width if rest else min(app.overlay.display_width, 640)} px "
                       f"{'at rest' if rest else 'preview'}: frame {np.median(f):.0f} / {np.percentile(f, 95):.0f}; "

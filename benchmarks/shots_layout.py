@@ -27,7 +27,7 @@ LAYOUTS = ((1366, 768), (1920, 1080))
 
 
 def settle(app) -> None:
-    for worker in (app.overlay_worker, app.mi_worker, app.compare_worker, app.scene_3d_worker):
+    for worker in (app.views.overlay_worker, app.views.mi_worker, app.views.compare_worker, app.views.scene_3d_worker):
         worker.wait_idle(30)
     time.sleep(1.5)  # the frame at rest and the table follow 0.3 s after the last change
 

@@ -158,7 +158,7 @@ def test_page_loads_with_panels_overlay_and_scene_list(page, app):
 def test_slider_move_changes_overlay_and_mi_readout(page, app):
     open_tab(page, "Seed")
     page.get_by_text("included scenes:").wait_for()
-    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.frames >= 1)
+    wait_for(lambda: app.views.overlay_worker.wait_idle(5) and app.overlay.frames >= 1)
     text0, digest0 = readout(page), overlay_digest(page)
     frames0 = app.overlay.frames
 
@@ -271,7 +271,7 @@ def test_two_tabs_share_state_and_a_closed_tab_loses_nothing(browser, context, a
         field.fill("1.5")
         field.press("Enter")
         wait_for(lambda: exact_field(b, "yaw").input_value() == "1.5", what="tab B's yaw field")
-        wait_for(lambda: app.mi_worker.wait_idle(5) and readout(a) == readout(b), what="the same readout in both")
+        wait_for(lambda: app.views.mi_worker.wait_idle(5) and readout(a) == readout(b), what="the same readout in both")
 
         open_tab(a, "Scenes")
         open_tab(b, "Scenes")
@@ -335,7 +335,7 @@ def test_one_key_press_paints_the_new_overlay_then_the_frame_at_rest(page, app):
     render = app.overlay.render
     app.overlay.render = lambda snap, rest=True: (render(snap, rest),
                                                   sent.append((snap.version, rest, hashlib.sha256(app.overlay.image._data).hexdigest())))[0]
-    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the first frame at rest")
+    wait_for(lambda: app.views.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the first frame at rest")
     pixels0, jpeg0 = painted_overlay(page)
     version0 = app.state.snapshot().version
 

@@ -448,7 +448,7 @@ def test_the_overlay_gets_the_space_at_both_layouts(browser, app, size):
         widest_3d = page.evaluate("() => Math.max(...Array.from(document.querySelectorAll('canvas')).map(c => c.clientWidth))")
         assert shown > widest_3d, f"overlay {shown} px, 3D view {widest_3d} px"
         assert shown <= width * 0.62
-        app.overlay_worker.wait_idle(10)
+        app.views.overlay_worker.wait_idle(10)
         assert app.overlay.frame_bytes <= 60_000
         screenshot(page, f"22_layout_{width}x{height}")
     finally:

@@ -104,7 +104,7 @@ def test_detections_run_verdict_and_a_frame_left_out(page, app):
     page.get_by_text("Board found in").first.wait_for(timeout=120_000)
     rows = frame_rows(page)
     assert len(rows) == BOARDS["n_scenes"] and sum(r.split("\t")[2].strip() in ("quad", "quad x2", "SB") for r in rows) == BOARDS["n_scenes"]
-    app.overlay_worker.wait_idle(10)
+    app.views.overlay_worker.wait_idle(10)
     wait_for(lambda: magenta_share(shown_overlay(page)) > 0.004, timeout=30, what="board points on the overlay")
     with_marks = shown_overlay(page)
     screenshot(page, "target_01_detections")

@@ -41,8 +41,8 @@ def app(scene_set, tmp_path):
     from l2e_studio.app.server import build_app
 
     a = build_app(scene_set, host="127.0.0.1", port=free_port(), out_dir=tmp_path / "results")
-    a.mi_worker.wait_idle(20)
-    a.recording_worker.wait_idle(20)
+    a.views.mi_worker.wait_idle(20)
+    a.views.recording_worker.wait_idle(20)
     yield a
     a.stop()
 
@@ -53,7 +53,7 @@ def user():
 
 def settle(app) -> None:
     assert app.maps.rebuilder.wait(30)
-    for w in (app.overlay_worker, app.mi_worker, app.compare_worker, app.scene_3d_worker):
+    for w in (app.views.overlay_worker, app.views.mi_worker, app.views.compare_worker, app.views.scene_3d_worker):
         assert w.wait_idle(20)
 
 
@@ -214,7 +214,7 @@ def test_a_scene_read_as_an_image_says_so_and_offers_nothing(tmp_path, monkeypat
 def settled_digest(page, app) -> str:
     """The overlay's digest once the server has sent its frame at rest and the page
     shows it (a preview while things move has other bytes for the same picture)."""
-    wait_for(lambda: app.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the frame at rest")
+    wait_for(lambda: app.views.overlay_worker.wait_idle(5) and app.overlay.rest_frame, what="the frame at rest")
     previous = overlay_digest(page)
     while True:
         time.sleep(0.4)

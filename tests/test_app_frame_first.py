@@ -26,8 +26,8 @@ def app(scene_set, tmp_path):
     from l2e_studio.app.server import build_app
 
     a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out")
-    a.overlay_worker.wait_idle(30)
-    a.mi_worker.wait_idle(30)
+    a.views.overlay_worker.wait_idle(30)
+    a.views.mi_worker.wait_idle(30)
     time.sleep(0.5)  # the first frame at rest and the tables
     yield a
     a.stop()
@@ -66,8 +66,8 @@ def test_the_readout_starts_after_the_frame_of_a_slider_step(app, monkeypatch):
         version = app.state.snapshot().version
         wait_for(lambda: any(w == "readout" and v >= version for _, w, v in events), what="the readout")
         assert first(events, "frame", version) < first(events, "readout", version)
-        app.mi_worker.wait_idle(10)
-        app.overlay_worker.wait_idle(10)
+        app.views.mi_worker.wait_idle(10)
+        app.views.overlay_worker.wait_idle(10)
 
 
 def test_a_scene_switch_sends_the_frame_before_the_tables_and_before_after(app, monkeypatch):

@@ -49,6 +49,6 @@ def test_edge_score_run_one_scale_everywhere(app):
     assert f"edge score {handed}" in app.optimise.status.content  # Optimise tab, after the run
     assert f"edge score {handed}" in app.results.summary.content  # Result tab
     app.accept_result()
-    wait_for(lambda: app.mi_worker.wait_idle(5) and app.reading is not None
+    wait_for(lambda: app.views.mi_worker.wait_idle(5) and app.reading is not None
              and np.allclose(app.reading.extrinsic.params, snap.accepted.params), what="the readout at the result")
     assert f"included scenes: {handed}" in app.extrinsic.readout.content  # readout after Accept

@@ -31,8 +31,8 @@ def app(scene_set, tmp_path):
     from l2e_studio.app.server import build_app
 
     a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out")
-    a.overlay_worker.wait_idle(10)
-    a.mi_worker.wait_idle(10)
+    a.views.overlay_worker.wait_idle(10)
+    a.views.mi_worker.wait_idle(10)
     yield a
     a.stop()
 
@@ -44,7 +44,7 @@ def user(client=None):
 
 
 def idle(app) -> None:
-    for w in (app.overlay_worker, app.mi_worker, app.compare_worker, app.scene_3d_worker):
+    for w in (app.views.overlay_worker, app.views.mi_worker, app.views.compare_worker, app.views.scene_3d_worker):
         assert w.wait_idle(20)
 
 
@@ -258,7 +258,7 @@ def test_camera_images_are_read_out_and_optimised_with_the_edge_score(tmp_path):
         a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out", objective=objective)
         try:
             assert a.readout.stack.objective_name == name and a.readout.label == label
-            a.mi_worker.wait_idle(10)
+            a.views.mi_worker.wait_idle(10)
             assert f"**{label} ·" in a.extrinsic.readout.content
             a.start_run(CalibrationSettings(coarse_to_fine=False))
             assert a.wait_run(120)

@@ -78,9 +78,9 @@ class EventMapSession:
             app.view3d.show_map(index)
             if index == app.state.snapshot().selected:
                 app.event_maps.show()
-        app.overlay_worker.poke()
-        app.mi_worker.poke()
-        app.compare_worker.poke()
+        app.views.overlay_worker.poke()
+        app.views.mi_worker.poke()
+        app.views.compare_worker.poke()
 
     def _finished(self, summary: RebuildSummary) -> None:
         app = self.app

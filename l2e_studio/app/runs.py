@@ -241,7 +241,7 @@ class Runner:
         snap = self.app.state.snapshot()
         self.app.optimise.show_progress(snap.run)
         if snap.follow_best and not cancelling:
-            self.app.overlay_worker.poke()
+            self.app.views.overlay_worker.poke()
 
     def _finished(self) -> None:
         app = self.app

@@ -61,7 +61,7 @@ def take(out: Path, scenes: Path, chromium: str, width: int = 1600, height: int 
                 _wait(lambda: app.state.snapshot().run.status == "done", 300)
                 page.get_by_role("tab", name="Result").click()
                 page.get_by_role("button", name="Accept as seed").click()
-                _wait(lambda: app.overlay_worker.wait_idle(1) and app.mi_worker.wait_idle(1), 30)
+                _wait(lambda: app.views.overlay_worker.wait_idle(1) and app.views.mi_worker.wait_idle(1), 30)
                 page.get_by_role("tab", name="Optimise").click()
                 page.get_by_text("Finished").first.wait_for()
                 time.sleep(1.0)

@@ -1,4 +1,4 @@
-"""The workbench server: one viser server, one shared session, the panels and the workers.
+"""The workbench server: one viser server, one shared session, the panels and the views.
 
 :func:`build_app` wires a loaded :class:`~l2e_studio.scenes.SceneSet` into a running
 :class:`App`; :func:`serve` does that and blocks (the ``l2e-studio`` command). Every GUI element
@@ -43,24 +43,13 @@ from .readout import MiReading, MiReadout
 from .maps import EventMapSession
 from .state import SessionState
 from .runs import CHECKERBOARD, METHOD_NAMES, Runner, checkerboard, targetless
-from .workers import LatestWorker, Settle, join_by
+from .views import Views
+from .workers import join_by
 
 log = logging.getLogger(__name__)
 
 TITLE = "L2E Studio"
 STOP_S = 5.0  # App.stop: every thread and a run in progress get this long, all together
-#: s without a change before the frame at rest replaces the preview (key auto-repeat and drags
-#: send a change every 16-50 ms; a person nudging pauses longer). The frame at rest should be
-#: painted within 400 ms of the input: this leaves ~250 ms to draw, encode, send and paint it.
-OVERLAY_REST_S = 0.15
-#: s after the readout before the scene table (every scene's score) is redrawn
-TABLE_REST_S = 0.25
-#: s without a change before the 3D view follows rapid inputs. In a browser without a GPU one
-#: camera move costs the page several 3D redraws of 50-80 ms each, which would hold up the next
-#: overlay frame of someone nudging the extrinsic; with a GPU it is a few milliseconds.
-POSE_3D_REST_S = 1.0
-#: s the readout and before/after wait for the overlay frame of their state (see ``_update_mi``)
-FRAME_FIRST_S = 0.25
 DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # rapid inputs: the gizmo follows at rest
 
 
@@ -81,9 +70,7 @@ class App:
         self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
         self.held_out: list[HeldOutScore] = []  # the last result's held-out scenes, scored
         self.result_scores: ResultScores | None = None  # the last result's answers, on the readout's scale
-        self._reference_mi: dict[tuple, float] = {}
         self.runner = Runner(self)
-        self.overlay_seconds: list[float] = []  # server-side render+encode time of each frame
         self.ui_lock = threading.RLock()  # one change at a time: state and widgets stay in step
 
         gui = server.gui
@@ -109,21 +96,7 @@ class App:
         self.compare = ComparePanel(self, self.overlay)
         self.view3d = View3D(self)
 
-        self._want_rest = True  # the next overlay frame is the one at rest (at start, and once inputs stop)
-        self._pose_3d_pending = False
-        self._frame_cond = threading.Condition()
-        self._frame_version = -1  # the state version of the last overlay frame handed to viser
-        self._tables_stale = False  # the scene tables still show the previous selection
-        self.overlay_worker = LatestWorker("overlay", self._render_overlay)
-        self.overlay_settle = Settle("overlay-rest", self._overlay_at_rest, OVERLAY_REST_S)
-        self.pose_settle = Settle("pose-3d-rest", self._pose_3d_at_rest, POSE_3D_REST_S)
-        # the scene table (every scene's score) follows at rest: re-rendering a table of 40-100
-        # rows on every step would hold up the readout and the next frame in the page
-        self.table_settle = Settle("scene-table-rest", self._table_at_rest, TABLE_REST_S)
-        self.mi_worker = LatestWorker("mi", self._update_mi)
-        self.compare_worker = LatestWorker("compare", self._render_compare)
-        self.scene_3d_worker = LatestWorker("scene-3d", self._show_scene_3d)
-        self.recording_worker = LatestWorker("recording", self.maps.read_recording)
+        self.views = Views(self)  # the overlay, the readout and the rest follow the state in their threads
         self.refresh()
 
     # --- the URL ----------------------------------------------------------------------------
@@ -159,50 +132,39 @@ class App:
         with self.ui_lock:
             self.extrinsic.show(extrinsic, values, source)
             if source in DEFERRED_3D_SOURCES:
-                self._pose_3d_pending = True  # the 3D view follows once the input rests
-                self.pose_settle.poke()
+                self.views.pose_3d_at_rest()
             elif source != "gizmo":
                 self.view3d.show_pose(extrinsic)
             self.extrinsic.show_pose_text(extrinsic)
             self.pairs.show()
-        self.overlay_worker.poke()
-        self.mi_worker.poke()
+        self.views.overlay_worker.poke()
+        self.views.mi_worker.poke()
 
     def select_scene(self, index: int) -> None:
         with self.ui_lock:
             self.state.select(index)
-        self.overlay_worker.poke()  # first: the overlay is what the user is waiting for
+        self.views.overlay_worker.poke()  # first: the overlay is what the user is waiting for
         with self.ui_lock:
             self.scenes.show_selection(table=False)
             self.event_maps.show()
-        # the two tables of every scene follow at rest: re-rendering 40-100 rows of markdown takes
-        # the page's main thread just when the new overlay should be painted
-        self._tables_stale = True
-        self.table_settle.poke()
-        self.recording_worker.poke()
-        self.mi_worker.poke()
-        self.compare_worker.poke()
-
-    def _show_scene_3d(self) -> None:
-        self.overlay_worker.wait_idle(1.0)
-        with self.ui_lock:
-            selected = self.state.snapshot().selected
-            self.view3d.show_scene(selected)
-            self.target.show_3d(selected)
+        self.views.tables_at_rest()  # the two tables of every scene
+        self.views.recording_worker.poke()
+        self.views.mi_worker.poke()
+        self.views.compare_worker.poke()
 
     def inclusion_changed(self) -> None:
         self.scenes.show_selection()
         self.target.show_table()
         self.optimise.show_start()
-        self.mi_worker.poke()
+        self.views.mi_worker.poke()
 
     def target_changed(self) -> None:
         """The board, its detections or the marks' switch changed (Target tab)."""
         if getattr(self, "target", None) is None:  # the Target tab is being built
             return
         self.optimise.show_start()
-        self.overlay_worker.poke()
-        self.scene_3d_worker.poke()
+        self.views.overlay_worker.poke()
+        self.views.scene_3d_worker.poke()
 
     def annotate(self, index: int, extrinsic: Extrinsic, image: np.ndarray, point_size: int,
                  box: tuple[float, float, float, float] | None = None) -> np.ndarray:
@@ -216,8 +178,8 @@ class App:
 
     def display_changed(self) -> None:
         """A display control moved (colour, size, opacity, contrast, map)."""
-        self.overlay_worker.poke()
-        self.compare_worker.poke()
+        self.views.overlay_worker.poke()
+        self.views.compare_worker.poke()
 
     def image_clicked(self, x: float, y: float) -> bool:
         """A click on the overlay at map pixel (x, y); True when a pair being picked took it."""
@@ -238,18 +200,18 @@ class App:
 
     def compare_changed(self) -> None:
         """A before/after control moved."""
-        self.compare_worker.poke()
+        self.views.compare_worker.poke()
 
     def follow_changed(self, follow: bool) -> None:
         """The overlay follows the optimiser's best estimate (and shows the result after) or not."""
         self.state.set_follow_best(follow)
-        self.overlay_worker.poke()
+        self.views.overlay_worker.poke()
 
     def sigma_changed(self, sigma: float) -> None:
         self.readout.set_sigma(sigma)
-        self.mi_worker.poke()
-        self.overlay_worker.poke()  # the "smoothed" map view uses the same sigma
-        self.compare_worker.poke()
+        self.views.mi_worker.poke()
+        self.views.overlay_worker.poke()  # the "smoothed" map view uses the same sigma
+        self.views.compare_worker.poke()
 
     def refresh(self) -> None:
         """Draw every panel from the state (at start-up)."""
@@ -260,10 +222,10 @@ class App:
         self.view3d.show_pose(snap.extrinsic)
         self.scenes.show_selection()
         self.results.show(snap)
-        self.recording_worker.poke()
-        self.overlay_worker.poke()
-        self.mi_worker.poke()
-        self.compare_worker.poke()
+        self.views.recording_worker.poke()
+        self.views.overlay_worker.poke()
+        self.views.mi_worker.poke()
+        self.views.compare_worker.poke()
         self.target.detect_boards()
 
     # --- event maps (rebuilt from raw recordings: :class:`EventMapSession`) ------------------
@@ -275,79 +237,6 @@ class App:
 
     def rebuild_maps(self, settings: Accumulation, all_event_scenes: bool = False) -> None:
         self.maps.rebuild(settings, all_event_scenes)
-
-    # --- workers ----------------------------------------------------------------------------
-    def _render_overlay(self) -> None:
-        t0 = time.perf_counter()
-        snap = self.state.snapshot()
-        rest, self._want_rest = self._want_rest, False
-        try:
-            self.overlay.render(snap, rest=rest)
-        finally:
-            with self._frame_cond:
-                self._frame_version = max(self._frame_version, snap.version)
-                self._frame_cond.notify_all()
-            if not rest:
-                # the quiet time counts from the last change, not from this preview's end: the
-                # frame at rest is not held up by the preview's own drawing
-                self.overlay_settle.poke(at=self.overlay_worker.last_poke)
-            else:
-                # the 3D cloud of a newly selected scene (~600 KB) follows the frame at rest: drawing
-                # it costs a GPU-less page 100+ ms on its main thread, which would hold up the paint
-                # of the new overlay
-                self.scene_3d_worker.poke()
-        self.overlay_seconds.append(time.perf_counter() - t0)
-        del self.overlay_seconds[:-200]
-
-    def _overlay_at_rest(self) -> None:
-        """Nothing moved for a moment: send the frame at rest (the best quality within the
-        byte budget; previews are coarser)."""
-        if not self.overlay.rest_frame:
-            self._want_rest = True
-            self.overlay_worker.poke()
-
-    def _pose_3d_at_rest(self) -> None:
-        """Rapid inputs stopped: pose the 3D camera (not on every step of a drag or of a run of
-        key presses, see ``POSE_3D_REST_S``)."""
-        with self.ui_lock:
-            if self._pose_3d_pending:
-                self._pose_3d_pending = False
-                self.view3d.show_pose(self.state.snapshot().extrinsic)
-
-    def _update_mi(self) -> None:
-        # Starts once the overlay's frame of this state is handed to viser (or after
-        # FRAME_FIRST_S): the frame is what a person waits for, and at 40 full-size scenes on
-        # 2 loaded cores the readout beside it made it 54-76 ms instead of 26-36 ms, while the
-        # readout itself finished at about the same time (144-188 ms either way).
-        self._wait_for_frame(self.state.snapshot().version)
-        snap = self.state.snapshot()  # the latest state: it may have moved on meanwhile
-        key = (self.readout.generation, snap.included)  # read first: a newer map only makes it stale
-        reading = self.readout.read(snap.extrinsic, snap.included)
-        if key not in self._reference_mi:
-            self._reference_mi[key] = self.readout.read(snap.reference, snap.included).total
-        self.reading = reading
-        self.extrinsic.show_mi(reading, snap, self._reference_mi[key])
-        self.overlay.show_caption(snap, reading)
-        self.table_settle.poke()
-
-    def _table_at_rest(self) -> None:
-        with self.ui_lock:
-            if self.reading is not None or self._tables_stale:
-                self.scenes.show_mi(self.reading)
-            if self._tables_stale:
-                self._tables_stale = False
-                self.target.show_table()
-
-    def _wait_for_frame(self, version: int) -> None:
-        """Return once the overlay frame of state ``version`` is handed to viser (at most
-        ``FRAME_FIRST_S``; at once when no frame is coming)."""
-        if not self.overlay_worker.wait_idle(0):
-            with self._frame_cond:
-                self._frame_cond.wait_for(lambda: self._frame_version >= version, FRAME_FIRST_S)
-
-    def _render_compare(self) -> None:
-        self._wait_for_frame(self.state.snapshot().version)  # the live overlay first (it is on show)
-        self.compare.render()
 
     # --- the optimisation -----------------------------------------------------------------------
     def run_settings(self) -> CalibrationSettings:
@@ -390,9 +279,9 @@ class App:
         self.results.show(snap, self.held_out, self.result_scores)
         self.optimise.show_handed_back(self.result_scores)
         self.target.result_shown(snap.result)
-        self.overlay_worker.poke()
-        self.mi_worker.poke()  # refreshes the captions
-        self.compare_worker.poke()
+        self.views.overlay_worker.poke()
+        self.views.mi_worker.poke()  # refreshes the captions
+        self.views.compare_worker.poke()
 
     # --- results ----------------------------------------------------------------------------------
     def _score_held_out(self, result: CalibrationResult | None) -> list[HeldOutScore]:
@@ -436,8 +325,8 @@ class App:
         self.state.discard_result()
         self.held_out, self.result_scores = [], None
         self.results.show(self.state.snapshot())
-        self.compare_worker.poke()
-        self.mi_worker.poke()
+        self.views.compare_worker.poke()
+        self.views.mi_worker.poke()
 
     # --- notifications --------------------------------------------------------------------------------
     def notify(self, client: Any, title: str, body: str, color: str | None = None) -> None:
@@ -457,18 +346,16 @@ class App:
     # --- shutdown -------------------------------------------------------------------------------------
     def stop(self, timeout: float = STOP_S) -> None:
         """Stop the app's threads and its server in about ``timeout`` seconds, however busy: a
-        run is cancelled (its result file still written), every worker told to stop at once,
-        then all are waited for against one deadline (not ``timeout`` each in turn: a Ctrl-C
-        on a busy app had taken past 20 s)."""
+        run is cancelled (its result file still written), every view told to stop at once, and
+        all are waited for against one deadline (not ``timeout`` each in turn: a Ctrl-C on a busy
+        app could have taken past 20 s)."""
         self.cancel_run()
-        threads = (self.overlay_settle, self.pose_settle, self.table_settle, self.target.worker, self.overlay_worker,
-                   self.mi_worker, self.compare_worker, self.scene_3d_worker, self.recording_worker)
-        for t in threads:
-            t.request_stop()
         deadline = time.monotonic() + timeout
+        self.target.worker.request_stop()
+        self.views.stop(deadline)
         self.wait_run(max(0.0, deadline - time.monotonic()))
         self.maps.rebuilder.wait(max(0.0, deadline - time.monotonic()))
-        join_by(threads, deadline)
+        join_by((self.target.worker,), deadline)
         self.server.stop()
 
 
