@@ -98,7 +98,7 @@ def lidars(count: int, folder: Path) -> None:
     """The method on lidars the dev sets lack: ``count`` synthetic frame-camera sequences per
     lidar model (``synth --lidar``): median and worst error against the truth, how many trusted,
     and how many of the untrusted would have been wrong (off by more than the verdict's limits)."""
-    from l2e_studio.synth.board_world import LIDARS
+    from l2e_studio.synth.lidars import LIDARS
     from l2e_studio.target_verdict import ACCURACY_DEG, ACCURACY_M
 
     print(f"== lidars ({count} synthetic frame-camera sequences each; error against the truth)")

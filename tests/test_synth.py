@@ -107,6 +107,29 @@ def test_lidar_pattern_covers_the_field_of_view():
     assert el.min() < -12 and el.max() > 12 and np.all(np.abs(el) <= 12.6)
 
 
+def test_a_spinning_lidar_sees_the_garage_in_its_rings(tmp_path, capsys):
+    """``--lidar vlp16``: the scans are 16 rings 2 deg apart over the 120 deg view, 0.2 deg apart
+    along a ring; the scenes load and the truth projects them into the camera image."""
+    d = lidar_directions(SynthConfig(lidar="vlp16"), np.random.default_rng(0))
+    el = np.degrees(np.arcsin(d[:, 2]))
+    az = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+    assert np.allclose(np.unique(np.round(el, 6)), np.arange(-15.0, 15.1, 2.0))
+    assert az.min() < -59.8 and az.max() > 59.8 and np.all(np.abs(az) <= 60.0)
+    assert len(d) == 16 * 600
+    out = tmp_path / "vlp"
+    args = ["synth", "--out", str(out), "--scenes", "2", "--width", "320", "--camera-image", "--lidar", "vlp16", "--quiet"]
+    assert cli_main(args) == 0
+    ss = load_scene_folder(out, use_cache=False)
+    truth = read_truth(out / "truth.yaml")
+    pts = ss.scenes[0].points
+    el = np.degrees(np.arctan2(pts[:, 2], np.hypot(pts[:, 0], pts[:, 1])))
+    assert len(np.unique(np.round(el))) <= 17 and len(pts) < 9600  # (range noise blurs a ring by a hair)
+    uv, front = project_points(truth.transform(pts), ss.camera)
+    assert (front & in_image(uv, ss.camera)).sum() > 1000
+    assert cli_main(args[:-3] + ["--force", "--lidar", "hdl32", "--points", "5000", "--quiet"]) == 2
+    assert "--points" in capsys.readouterr().err
+
+
 def test_scene_arrays_have_the_documented_shapes_and_ranges(medium_scenes):
     camera, truth, _, scenes = medium_scenes
     for points, intensity, event_map in scenes:

@@ -37,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "event maps")
     p.add_argument("--traps", help="only some failure modes, comma-separated (see --realism)")
     p.add_argument("--dim", action="store_true", help="a dim cloud: intensities 0..14 (the sparse-cloud trap)")
+    p.add_argument("--lidar", choices=("vlp16", "hdl32", "hdl64", "os128"),
+                   help="a spinning lidar's rings and azimuth step: Velodyne VLP-16, HDL-32E, HDL-64E, Ouster "
+                        "OS1-128 (garage scenes: within the 120 deg view, instead of the MEMS raster and --points; "
+                        "--target: default vlp16)")
     board = p.add_argument_group("checkerboard sequences (--target checkerboard)")
     board.add_argument("--target", choices=("checkerboard",),
                        help="a board held up at a different pose in each scene (10 scenes, 10 x 7 squares of 68 mm), "
@@ -47,9 +51,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                             "board (default: frame)")
     board.add_argument("--lens", choices=("radtan", "equidistant"), help="lens distortion model (default: radtan)")
     board.add_argument("--range-noise-m", type=float, help="lidar range noise (sigma, default 0.015 m)")
-    board.add_argument("--lidar", choices=("vlp16", "hdl32", "hdl64", "os128"),
-                       help="the spinning lidar's rings and azimuth step: Velodyne VLP-16, HDL-32E, HDL-64E, "
-                            "Ouster OS1-128 (default: vlp16)")
     p.add_argument("--force", action="store_true", help="write into a non-empty folder (old scene_* files are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -58,6 +59,8 @@ def config_from_args(args: argparse.Namespace):
     """The :class:`SynthConfig` the command line asks for (raises ValueError when out of range)."""
     from ..synth import SAMPLE_CONFIG, SynthConfig, config_with
 
+    if args.lidar is not None and args.points is not None:
+        raise ValueError("--points sets the MEMS raster's size; a --lidar's rings and azimuth step set their own")
     base = SAMPLE_CONFIG if args.preset == "sample" else SynthConfig()
     height = args.height
     if args.width is not None and height is None:
@@ -68,7 +71,7 @@ def config_from_args(args: argparse.Namespace):
         config = config_with(config, distortion=False)
     traps = tuple(t.strip() for t in args.traps.split(",") if t.strip()) if args.traps else None
     return config_with(config, map_kind="image" if args.camera_image else None, realism=args.realism or None,
-                       traps=traps, intensity_scale=0.055 if args.dim else None)
+                       traps=traps, intensity_scale=0.055 if args.dim else None, lidar=args.lidar)
 
 
 #: options that shape the garage scenes only (refused with --target).
@@ -99,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
 
     err = Console(stderr=True)
     try:
-        board_only = [f"--{n.replace('_', '-')}" for n in ("modality", "lens", "range_noise_m", "lidar") if getattr(args, n) is not None]
+        board_only = [f"--{n.replace('_', '-')}" for n in ("modality", "lens", "range_noise_m") if getattr(args, n) is not None]
         if board_only and not args.target:
             raise ValueError(f"{board_only[0]} needs --target checkerboard")
         config = target_config_from_args(args) if args.target else config_from_args(args)

@@ -28,7 +28,8 @@ from ..errors import InputError
 from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic
 from .board import Board, pixel_rays
 from .board_views import IMAGE_MODALITIES, MODALITIES, render_view
-from .board_world import LIDARS, LidarModel, board_in_view, board_pose, lidar_scan, make_board_scene
+from .board_world import board_in_view, board_pose, lidar_scan, make_board_scene
+from .lidars import LIDARS, LidarModel
 from .dataset import clear_out_dir, perturb, scene_stem
 
 LENSES = ("radtan", "equidistant")

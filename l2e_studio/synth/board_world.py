@@ -17,31 +17,8 @@ from scipy.spatial.transform import Rotation
 from ..camera import CameraModel
 from ..geometry import Extrinsic, in_image, project_points
 from .board import Board
+from .lidars import LidarModel, ring_directions
 from .world import Box, cast, random_waves, surface
-
-RING_ELEVATIONS_DEG = np.arange(-15.0, 15.1, 2.0)  # VLP-16
-
-
-@dataclass(frozen=True)
-class LidarModel:
-    """A spinning multi-beam lidar: ring elevations, azimuth step, range noise and dropouts."""
-
-    elevations_deg: tuple[float, ...] = tuple(RING_ELEVATIONS_DEG)
-    azimuth_step_deg: float = 0.2
-    range_noise_m: float = 0.015
-    dropout: float = 0.01
-    max_range_m: float = 100.0
-
-
-#: the spinning lidars a synthetic board sequence can be seen by: ring elevations (deg) and
-#: azimuth step (deg), after the data sheets (an HDL-64E looks mostly down: +2 to -24.9 deg, so a
-#: board held high is cut by its top beam)
-LIDARS = {
-    "vlp16": dict(elevations_deg=tuple(RING_ELEVATIONS_DEG), azimuth_step_deg=0.2),
-    "hdl32": dict(elevations_deg=tuple(np.linspace(-30.67, 10.67, 32)), azimuth_step_deg=0.16),
-    "hdl64": dict(elevations_deg=tuple(np.linspace(-24.9, 2.0, 64)), azimuth_step_deg=0.17),
-    "os128": dict(elevations_deg=tuple(np.linspace(-22.5, 22.5, 128)), azimuth_step_deg=0.35),
-}
 
 
 @dataclass
@@ -140,12 +117,7 @@ def _rod(a: np.ndarray, b: np.ndarray, radius: float, rho: float) -> Box:
 def lidar_scan(scene: BoardScene, board: Board, lidar: LidarModel, rng: np.random.Generator):
     """One revolution: points (N, 3) float32 (lidar frame), intensity (N,) float32 0..255,
     ring (N,) uint16, and a mask of the returns that hit the board's front face."""
-    el = np.radians(np.asarray(lidar.elevations_deg))
-    n_az = int(round(360.0 / lidar.azimuth_step_deg))
-    az = np.radians(rng.uniform(0, lidar.azimuth_step_deg) + np.arange(n_az) * lidar.azimuth_step_deg)
-    E, A = np.meshgrid(el, az, indexing="ij")
-    ring = np.repeat(np.arange(el.size, dtype=np.uint16), n_az)
-    dirs = np.column_stack([(np.cos(E) * np.cos(A)).ravel(), (np.cos(E) * np.sin(A)).ravel(), np.sin(E).ravel()])
+    dirs, ring = ring_directions(lidar.elevations_deg, lidar.azimuth_step_deg, rng)
     origin = np.zeros(3)
     hits = cast(scene.boxes, origin, dirs, lidar.max_range_m)
     surf = surface(scene.boxes, origin, dirs, hits)

@@ -36,6 +36,7 @@ from ..camera import CameraModel
 from ..errors import InputError
 from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
 from .layout import make_layout
+from .lidars import LIDARS, ring_directions
 from .realism import SKY_RANGE_M, TRAPS, camera_image, event_traps, sky_mask
 from .world import cast, surface
 
@@ -72,6 +73,9 @@ class SynthConfig:
     realism: bool = False  # every failure mode of real data for the map kind (realism.TRAPS)
     traps: tuple[str, ...] = ()  # or some of them, by name
     intensity_scale: float = 1.0  # < 1: a dim cloud (0.055 gives the 0..14 intensities of a sparse-cloud trap)
+    #: a spinning lidar's rings (a name of ``lidars.LIDARS``: vlp16, hdl32, ...) within the lidar's
+    #: horizontal field of view, instead of the MEMS raster (``points_per_scan`` then unused)
+    lidar: str | None = None
 
     def __post_init__(self) -> None:
         if self.n_scenes < 1 or self.width < 16 or self.height < 16 or self.points_per_scan < 100:
@@ -90,6 +94,8 @@ class SynthConfig:
                              f"expected some of {', '.join(TRAPS[self.map_kind])}")
         if not 0 < self.intensity_scale <= 1:
             raise ValueError("intensity_scale must be in (0, 1]")
+        if self.lidar is not None and self.lidar not in LIDARS:
+            raise ValueError(f"lidar must be one of {', '.join(LIDARS)}")
 
     @property
     def active_traps(self) -> tuple[str, ...]:
@@ -131,7 +137,11 @@ def perturb(truth: Extrinsic, error_deg: float, error_m: float, rng: np.random.G
 
 
 def lidar_directions(config: SynthConfig, rng: np.random.Generator) -> np.ndarray:
-    """Unit ray directions (lidar frame) of one scan: a jittered MEMS-like zig-zag raster."""
+    """Unit ray directions (lidar frame) of one scan: a jittered MEMS-like zig-zag raster, or
+    the rings of ``config.lidar`` within the horizontal field of view."""
+    if config.lidar is not None:
+        spec = LIDARS[config.lidar]
+        return ring_directions(spec["elevations_deg"], spec["azimuth_step_deg"], rng, config.lidar_hfov_deg)[0]
     aspect = config.lidar_hfov_deg / config.lidar_vfov_deg
     n_h = max(2, int(round(np.sqrt(config.points_per_scan * aspect))))
     n_v = max(2, int(round(config.points_per_scan / n_h)))
