@@ -8,8 +8,8 @@ A run is *worse* when its rotation error grows by > 0.1 deg or its translation e
 *closer* when it is not worse and one of them shrinks by more than that, else *kept*.
 Also: runs started at the reference, and one-axis sweeps of the new objective (PNG).
 
-    python benchmarks/bench_realdata.py [--runs 20] [--rigs all|manual,1+2,3,kitti,<folder>...] [--sweeps]
-        [--levels 1,2,5,0] [--save rows.json]
+    python benchmarks/bench_realdata.py [--runs 20] [--rigs all|none|manual,1+2,3,kitti,<folder>...] [--sweeps]
+        [--levels 1,2,5,0] [--synthetic vlp16,hdl32,hdl64,os128 [--synthetic-scenes 1,8]] [--save rows.json]
     python benchmarks/bench_realdata.py --table old.json new.json     # two saved runs side by side
 
 The engine is whatever ``l2e_studio`` imports: run once with ``PYTHONPATH`` at a checkout of an
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from realdata_rigs import load_rigs, perturbations  # noqa: E402
+from realdata_rigs import load_rigs, perturbations, synthetic_rigs  # noqa: E402
 
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  # noqa: E402
 from l2e_studio.verdict import judge  # noqa: E402
@@ -162,6 +162,9 @@ def main() -> None:
     p.add_argument("--sweeps", action="store_true")
     p.add_argument("--boards", action="store_true",
                    help="rigs with a target.yaml: the boards in view must agree with a trusted result")
+    p.add_argument("--synthetic", help="also synthetic rigs (a known truth: an unseen rig's stand-in): spinning "
+                                       "lidars, e.g. vlp16,hdl64 (--rigs none: those alone)")
+    p.add_argument("--synthetic-scenes", default="1,8", help="scenes per synthetic rig, e.g. 1,8")
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     args = p.parse_args()
@@ -171,7 +174,9 @@ def main() -> None:
             rows += [dict(r, engine=path.stem) for r in json.loads(path.read_text())]
         print(table(rows))
         return
-    rigs = load_rigs(args.rigs.split(","))
+    rigs = load_rigs(args.rigs.split(",")) if args.rigs != "none" else []
+    if args.synthetic:
+        rigs += synthetic_rigs(args.synthetic.split(","), [int(k) for k in args.synthetic_scenes.split(",")])
     if not rigs:
         sys.exit("no real data found under ../shared/realdata (set L2E_REALDATA)")
     if args.sweeps:

@@ -92,3 +92,24 @@ def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.
         a, b = rng.normal(size=3), rng.normal(size=3)
         out.append((m * a / np.linalg.norm(a), np.radians(deg) * b / np.linalg.norm(b)))
     return out
+
+
+def synthetic_rigs(lidars: list[str], scene_counts: list[int], seed: int = 11) -> list[Rig]:
+    """Rigs of synthetic garage scenes with a known truth, as an unseen rig's stand-in: camera
+    images with every failure mode of real ones (``--realism``), seen by the spinning lidar
+    ``lidars`` (``synth.lidars.LIDARS`` names) in ``scene_counts`` scenes each (built in memory;
+    the reference is the truth)."""
+    from l2e_studio.synth.dataset import SynthConfig, make_rig, make_scene
+
+    rigs = []
+    for lidar in lidars:
+        for n in scene_counts:
+            config = SynthConfig(n_scenes=n, map_kind="image", realism=True, lidar=lidar, seed=seed)
+            camera, truth, _ = make_rig(config)
+            scenes = []
+            for i in range(n):
+                points, intensity, grey = make_scene(config, i, truth, camera)
+                scenes.append(Scene(f"scene_{i:03d}", points, intensity, grey.astype(np.float32), "image"))
+            rigs.append(Rig(f"synth_{lidar}_{n}", camera, truth, tuple(scenes)))
+    return rigs
+
