@@ -178,8 +178,9 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
     """``handed`` with the seed's rotation, and the seed's translation along the axes outside
     ``seed_axes``, wherever its move from the seed is within SIGNIFICANT x ``spread``.
     Returns (extrinsic, rotation is the seed's, those translation axes, one sentence). A partial
-    mix must still score above the seed on each of ``sides()`` (the data and its halves), else the
-    seed stands whole: the significant part alone was not what the data preferred."""
+    mix must still score above the seed on each of ``sides()`` (the data and its halves); else the
+    parts trade against each other and ``handed`` is taken whole if it scores above the seed on
+    each (a trusted result does), the seed whole if not."""
     turn = seed.error_to(Extrinsic(handed.rotvec, seed.translation))[0]
     keep_rot = turn <= SIGNIFICANT * spread.deg
     moved = np.abs(handed.translation - seed.translation)
@@ -200,8 +201,17 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
         parts.append(f"the seed's translation along {axes} stands (the result moved {cm} cm, within "
                      f"{SIGNIFICANT:g}x the {100 * spread.m:.1f} cm its independent estimates spread)")
     out = Extrinsic(seed.rotvec if keep_rot else handed.rotvec, np.where(keep_t, seed.translation, handed.translation))
-    if (not keep_rot or (mine & ~keep_t).any()) and not all(  # some of the move remains: it alone must beat the seed
-            h.score(out, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides()):
+
+    def beats_seed(ext: Extrinsic) -> bool:
+        return all(h.score(ext, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides())
+
+    if (not keep_rot or (mine & ~keep_t).any()) and not beats_seed(out):  # some of the move remains: it alone must beat the seed
+        # the parts do not come apart (a turn that made up for a move): the move is taken whole
+        # where the whole beats the seed everywhere, as a trusted result does; else none of it
+        if beats_seed(handed):
+            return handed, False, "", ("the significant part of the move does not, alone, score above the seed on "
+                                       "the data and both halves (they trade against each other): the result is "
+                                       "handed back whole")
         parts.append("the rest of the move does not, alone, score above the seed on the data and both halves: "
                      "the seed stands whole")
         out, keep_rot, keep_t = seed, True, mine

@@ -108,3 +108,25 @@ def test_a_settled_axis_is_not_called_trusted_in_the_summary():
     both = Verdict("trusted-rotation", Extrinsic(np.zeros(3), np.zeros(3)), False, (), (), 0.0, (), "z",
                    Spread(0.1, 0.008), False, "xy", note)
     assert both.summary().startswith("rotation trusted; along z the translation is not pinned down")
+
+
+def test_a_turn_that_made_up_for_a_move_is_handed_back_whole(stack):
+    """The seed's translation is 1.5 cm off and its rotation made up for it (the best rotation for
+    that translation); the result is the truth. The turn is significant, the 1.5 cm is not, but the
+    truth's rotation with the seed's translation scores below the seed: the parts trade against
+    each other, and the truth, above the seed on the data and both halves, is handed back whole
+    (not the seed, 0.1-0.2 deg off)."""
+    from dataclasses import replace
+
+    from l2e_studio.calibrate import refine
+
+    final, truth = stack
+    moved = Extrinsic(truth.rotvec, truth.translation + np.array([0.015, 0.0, 0.0]))
+    s = CalibrationSettings()
+    seed = refine(final, moved, replace(s, rotation_only=True, coarse_to_fine=False, global_search=False,
+                                         rotation_bound_deg=1.0))
+    turn = seed.error_to(truth)[0]
+    spread = Spread(turn / 4, 0.01)  # the turn is significant, the 1.5 cm within 2 x 1 cm
+    assert final.score(moved, per_scene=False)[0] < final.score(seed, per_scene=False)[0]  # the mix loses
+    out, seed_rot, axes, note = settle(seed, truth, "", spread, sides_of(final, seed))
+    assert out is truth and not seed_rot and axes == "" and "handed back whole" in note
