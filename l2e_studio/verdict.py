@@ -202,8 +202,10 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
                      f"{SIGNIFICANT:g}x the {100 * spread.m:.1f} cm its independent estimates spread)")
     out = Extrinsic(seed.rotvec if keep_rot else handed.rotvec, np.where(keep_t, seed.translation, handed.translation))
 
+    at_seed = functools.cache(lambda: [h.score(seed, per_scene=False)[0] for h in sides()])  # once, if at all
+
     def beats_seed(ext: Extrinsic) -> bool:
-        return all(h.score(ext, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides())
+        return all(h.score(ext, per_scene=False)[0] > s for h, s in zip(sides(), at_seed()))
 
     if (not keep_rot or (mine & ~keep_t).any()) and not beats_seed(out):  # some of the move remains: it alone must beat the seed
         # the parts do not come apart (a turn that made up for a move): the move is taken whole
