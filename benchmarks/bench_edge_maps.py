@@ -23,6 +23,10 @@ Candidates (each normalised by its 99th percentile, as the engine's map is):
     L2E_REALDATA=../shared/realdata PYTHONPATH=$PWD python benchmarks/bench_edge_maps.py \\
         --rigs synth_vlp16_8,synth_os128_8,hitsz_vlp16,lcecalib_rlfs01 --variants base,gx --seeds 7
 
+With ``--verdict N`` it runs the whole engine instead (optimiser and verdict, ``bench_realdata``'s
+rows: N runs from each of 1 deg / 5 cm, 2 deg / 10 cm and 5 deg / 20 cm, and 2 from the
+reference), one row set per candidate, so closer / kept / worse and trusted-but-worse compare.
+
 Rig names: those of ``realdata_rigs.ALL`` and ``synth_<lidar>_<scenes>`` (e.g. ``synth_vlp16_8``).
 """
 
@@ -157,6 +161,7 @@ def main() -> None:
     p.add_argument("--rigs", default="synth_vlp16_8,synth_os128_8,hitsz_vlp16,lcecalib_rlfs01,lcecalib_rles01_frame")
     p.add_argument("--variants", default="base,gx")
     p.add_argument("--seeds", type=int, default=7, help="starts 2 deg / 10 cm off the reference, besides the reference")
+    p.add_argument("--verdict", type=int, default=0, help="runs a seed level through the whole engine (bench_realdata's rows)")
     p.add_argument("--save", type=Path, help="rows as JSON")
     p.add_argument("--table", type=Path, nargs="*", help="print the table of saved rows and exit")
     args = p.parse_args()
@@ -164,6 +169,17 @@ def main() -> None:
         print(table([r for path in args.table for r in json.loads(path.read_text())]))
         return
     rows = []
+    if args.verdict:
+        from bench_realdata import LEVELS, run_rig, table as verdict_table
+
+        for rig in rigs_named(args.rigs.split(",")):
+            for variant in args.variants.split(","):
+                with gradient(variant):
+                    rows += [dict(r, engine=variant) for r in run_rig(rig, args.verdict, list(LEVELS.values()), ["new"])]
+        print(verdict_table(rows))
+        if args.save:
+            args.save.write_text(json.dumps(rows, indent=1))
+        return
     for rig in rigs_named(args.rigs.split(",")):
         board = board_solve(rig)
         for variant in args.variants.split(","):
