@@ -1,7 +1,7 @@
 """Image-side edge maps for the edge score, side by side (issue 16): where the optimiser ends.
 
 The edge score reads a band-passed image gradient under the lidar's edge points. This benchmark
-swaps only the gradient step (``scoring.edges.gradient_magnitude``) for each candidate and, per
+swaps only the gradient step (``scoring.edges.scan_gradient``) for each candidate and, per
 rig, runs the optimiser alone (no verdict) from the reference and from ``--seeds`` starts
 2 deg / 10 cm off it. It reports each end's error to the reference (on synthetic rigs: the
 truth), the score at the end over the score at the reference, and on rigs with a checkerboard
@@ -9,11 +9,13 @@ in view the error to the board solve (an independent reference of the same rig).
 
 Candidates (each normalised by its 99th percentile, as the engine's map is):
 
-* ``base``   the engine's: Sobel magnitude after a 1 px blur;
+* ``base``   the engine's until stop 28: Sobel magnitude after a 1 px blur;
 * ``blur2``  the same after a 2 px blur (fine texture suppressed);
-* ``gx``     only the gradient across the scan lines (|d/du| on upright rigs): the lidar finds
+* ``gx``     the engine's since stop 29: only the gradient across the scan lines (|d/du| on
+             upright rigs; the engine's own follows the rings as the seed projects them): the lidar finds
              its edges between horizontal neighbours, so an image edge it can match has a
              horizontal gradient; horizontal image edges are clutter it can never line up;
+* ``rows``   |d/du| whatever the rig (stop 28's ``gx``, before it followed the rings);
 * ``a05`` / ``a03``  the vertical gradient kept at half / 0.3 weight;
 * ``coh``, ``gxcoh``  magnitude / ``gx`` times the structure tensor's coherence (foliage is
              incoherent);
@@ -45,7 +47,7 @@ from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.scoring import edges
 from realdata_rigs import load_rigs, perturbations, synthetic_rigs
 
-ENGINE = edges.gradient_magnitude
+ENGINE = edges.scan_gradient
 
 
 def _normalised(m: np.ndarray) -> np.ndarray:
@@ -64,47 +66,48 @@ def _coherence(gx: np.ndarray, gy: np.ndarray, sigma: float = 2.0) -> np.ndarray
 
 
 def _anisotropic(vertical: float):
-    def gradient(image: np.ndarray) -> np.ndarray:
+    def gradient(image: np.ndarray, scan=None) -> np.ndarray:
         gx, gy = _gradients(image)
         return _normalised(edges.magnitude(gx, vertical * gy))
     return gradient
 
 
-def _blur2(image):
+def _blur2(image, scan=None):
     return _normalised(edges.magnitude(*_gradients(image, 2.0)))
 
 
-def _coh(image):
+def _coh(image, scan=None):
     gx, gy = _gradients(image)
     return _normalised(edges.magnitude(gx, gy) * _coherence(gx, gy))
 
 
-def _gxcoh(image):
+def _gxcoh(image, scan=None):
     gx, gy = _gradients(image)
     return _normalised(np.abs(gx) * _coherence(gx, gy))
 
 
-def _local(image):
-    m = ENGINE(image)
+def _local(image, scan=None):
+    m = edges.gradient_magnitude(image)
     return _normalised(m / (cv2.GaussianBlur(m, (0, 0), 8.0) + 0.1))
 
 
-def _log(image):
+def _log(image, scan=None):
     return _normalised(edges.magnitude(*_gradients(np.log1p(np.asarray(image, np.float32)))))
 
 
-VARIANTS = {"base": ENGINE, "blur2": _blur2, "gx": _anisotropic(0.0), "a05": _anisotropic(0.5),
+VARIANTS = {"base": lambda image, scan=None: edges.gradient_magnitude(image), "blur2": _blur2, "gx": ENGINE,
+            "rows": _anisotropic(0.0), "a05": _anisotropic(0.5),
             "a03": _anisotropic(0.3), "coh": _coh, "gxcoh": _gxcoh, "local": _local, "log": _log}
 
 
 @contextmanager
 def gradient(name: str):
     """The engine with candidate ``name`` as its image gradient, for the block's duration."""
-    edges.gradient_magnitude = VARIANTS[name]
+    edges.scan_gradient = VARIANTS[name]
     try:
         yield
     finally:
-        edges.gradient_magnitude = ENGINE
+        edges.scan_gradient = ENGINE
 
 
 def rigs_named(names: list[str]):

@@ -17,14 +17,11 @@ Two estimators live here:
 
 from __future__ import annotations
 
-import os
 import threading
 import weakref
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
-import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -35,20 +32,11 @@ from .scoring import OBJECTIVES
 from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
-from .io.maps import MAP_CLIP
 from .scenes import Scene
+from .score_maps import CLIP, scan_directions, stack_maps
+from .workers import CHUNK, run_chunks, run_tasks
 
-#: Maps of accumulated events are clipped here (the paper); camera images keep their 0..255.
-CLIP = MAP_CLIP
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
-
-
-def prepare_map(event_map: np.ndarray, sigma: float = 5.0, clip: float = 127.0) -> np.ndarray:
-    """Clip an accumulated event map to [0, clip] and Gaussian-smooth it (sigma in pixels)."""
-    m = np.clip(np.asarray(event_map, dtype=np.float32), 0.0, clip)
-    if sigma > 0:
-        m = cv2.GaussianBlur(m, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)
-    return m
 
 
 @dataclass(frozen=True)
@@ -68,6 +56,7 @@ class SceneStack:
     full_camera: CameraModel | None = None
     objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
     weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
+    scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``edges``)
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -84,7 +73,8 @@ class SceneStack:
         """Stack ``scenes`` for ``objective`` (``mi`` or ``edges``); with a ``reference``
         extrinsic, drop points that cannot reach the image for any extrinsic within
         ``reach_m`` / ``reach_deg`` of it (an over-estimate). For ``edges`` only the points on
-        lidar edges are kept, with their weights."""
+        lidar edges are kept, with their weights, and the image gradient is read across the
+        scan lines as the ``reference`` projects them (without one: across the image rows)."""
         if not scenes:
             raise ValueError("no scenes to stack")
         if objective not in OBJECTIVES:
@@ -109,19 +99,21 @@ class SceneStack:
             owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
         raw = tuple(np.asarray(sc.event_map, dtype=np.float32) for sc in scenes)
         kinds = tuple(sc.map_kind for sc in scenes)
+        scan = scan_directions(camera, reference) if objective == "edges" and reference is not None else None
         return cls(
             camera=camera,
             names=tuple(sc.name for sc in scenes),
             points=np.ascontiguousarray(np.concatenate(pts).T),
             l_bins=np.concatenate(bins),
             scene_of=np.concatenate(owner),
-            maps=_stack_maps(raw, kinds, sigma, objective=objective),
+            maps=stack_maps(raw, kinds, sigma, objective=objective, scan=scan),
             map_kinds=kinds,
             raw_maps=raw,
             sigma=float(sigma),
             full_camera=camera,
             objective_name=objective,
             weights=np.concatenate(weights) if objective == "edges" else None,
+            scan=scan,
         )
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
@@ -131,7 +123,7 @@ class SceneStack:
             return self
         full = self.full_camera or self.camera
         camera = full if scale == 1.0 else full.scaled(scale)
-        maps = _stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name)
+        maps = stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name, self.scan)
         return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
 
     def with_map(self, index: int, raw_map: np.ndarray) -> "SceneStack":
@@ -145,7 +137,7 @@ class SceneStack:
                              f"the stack's are {self.raw_maps[index].shape[1]}x{self.raw_maps[index].shape[0]}")
         size = (self.camera.width, self.camera.height)
         maps = self.maps.copy()  # the old stack stays valid for whoever holds it (immutable)
-        maps[index] = _stack_maps([raw], [self.map_kinds[index]], self.sigma, size, self.objective_name)[0]
+        maps[index] = stack_maps([raw], [self.map_kinds[index]], self.sigma, size, self.objective_name, self.scan)[0]
         raw_maps = self.raw_maps[:index] + (raw,) + self.raw_maps[index + 1:]
         return replace(self, maps=maps, raw_maps=raw_maps)
 
@@ -210,7 +202,7 @@ class SceneStack:
         R = extrinsic.R.astype(np.float32)
         t = extrinsic.translation.astype(np.float32)
         out = np.empty(self.n_points, np.int32)
-        _run_chunks(lambda a, b: compiled.pixel_index(self.points[:, a:b], R, t, self.camera, MIN_DEPTH, out[a:b]),
+        run_chunks(lambda a, b: compiled.pixel_index(self.points[:, a:b], R, t, self.camera, MIN_DEPTH, out[a:b]),
                     self.n_points)
         return out
 
@@ -243,7 +235,7 @@ class SceneStack:
             if then is not None:
                 then(s, joints[s])
 
-        _run_tasks(scene, range(self.n_scenes))
+        run_tasks(scene, range(self.n_scenes))
         return joints
 
     def mi(
@@ -353,7 +345,7 @@ class MapObjective:
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
         d = np.empty((6, n), dtype=np.float32) if jacobian else None
-        _run_chunks(lambda a, b: self._sample_chunk(R, t, a, b, e, d), n)
+        run_chunks(lambda a, b: self._sample_chunk(R, t, a, b, e, d), n)
         np.minimum(e, E_MAX, out=e)
         return e, d
 
@@ -487,40 +479,6 @@ class MIObjective(MapObjective):
 
 
 #: Threads that evaluate chunks of points in parallel.
-WORKERS = int(os.environ.get("L2E_THREADS", min(4, os.cpu_count() or 1)))
-_POOL: ThreadPoolExecutor | None = None
-
-
-CHUNK = 65536  # points per work item: a chunk's temporaries stay in cache
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(WORKERS, thread_name_prefix="l2e-objective")
-    return _POOL
-
-
-def _run_chunks(work: Callable[[int, int], None], n: int) -> None:
-    """Call ``work(a, b)`` over ``[0, n)`` in chunks, on the worker threads when there are several.
-
-    Each call writes its own slice of the output arrays, so the chunks need no locking; numpy
-    releases the GIL inside its loops, so two cores really work at once.
-    """
-    _run_tasks(lambda ab: work(*ab), [(a, min(a + CHUNK, n)) for a in range(0, n, CHUNK)])
-
-
-def _run_tasks(work: Callable, items: Sequence) -> None:
-    """Call ``work(item)`` for every item, on the worker threads when there are several."""
-    items = list(items)
-    if WORKERS > 1 and len(items) > 1:
-        for f in [_pool().submit(work, item) for item in items]:
-            f.result()
-    else:
-        for item in items:
-            work(item)
-
-
 E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 
@@ -541,7 +499,7 @@ def _e_bins(maps: np.ndarray) -> np.ndarray:
                 return bins
     S, Hp, Wp = maps.shape
     bins = np.empty((S, Hp - 2, Wp - 2), np.uint8)
-    _run_tasks(lambda s: compiled.e_bins(maps[s], bins[s]), range(S))
+    run_tasks(lambda s: compiled.e_bins(maps[s], bins[s]), range(S))
     bins = bins.reshape(S, -1)
     with _E_BINS_LOCK:
         live = [(r, b) for r, b in _E_BINS if r() is not None]
@@ -565,35 +523,6 @@ def _project_inside(points: np.ndarray, R: np.ndarray, t: np.ndarray, camera: Ca
     pc += t[:, None]
     uv, front = project_points(pc.T, camera)
     return uv, front & (pc[2] > MIN_DEPTH) & in_image(uv, camera)
-
-
-def _stack_maps(
-    raw: Sequence[np.ndarray],
-    kinds: Sequence[str],
-    sigma: float,
-    size: tuple[int, int] | None = None,
-    objective: str = "mi",
-) -> np.ndarray:
-    """Maps prepared for ``objective``, resized to ``size`` (w, h) before smoothing, with a
-    one-pixel border that reads "nothing": zero counts for MI, "no edge" for edges."""
-    h, w = raw[0].shape
-    out_w, out_h = size or (w, h)
-    factor = out_w / w
-    if objective == "edges":
-        out = np.full((len(raw), out_h + 2, out_w + 2), edges.OFFSET, dtype=np.float32)
-
-        def prepare(i: int) -> None:
-            out[i, 1:-1, 1:-1] = edges.edge_map(raw[i], sigma * factor, (out_w, out_h))
-    else:
-        out = np.zeros((len(raw), out_h + 2, out_w + 2), dtype=np.float32)
-
-        def prepare(i: int) -> None:
-            m = np.clip(raw[i], 0.0, CLIP[kinds[i]])
-            if (out_w, out_h) != (w, h):
-                m = cv2.resize(m, (out_w, out_h), interpolation=cv2.INTER_AREA)
-            out[i, 1:-1, 1:-1] = prepare_map(m, sigma * factor, CLIP[kinds[i]])
-    _run_tasks(prepare, range(len(raw)))  # OpenCV releases the GIL: one map per core
-    return out
 
 
 def _reachable(points: np.ndarray, camera: CameraModel, ref: Extrinsic, reach_m: float, reach_deg: float) -> np.ndarray:

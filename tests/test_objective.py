@@ -6,7 +6,8 @@ import pytest
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import project_points
 from l2e_studio.scoring.mi import mutual_information
-from l2e_studio.objective import SceneStack, prepare_map
+from l2e_studio.objective import SceneStack
+from l2e_studio.score_maps import prepare_map
 from l2e_studio.scenes import Scene
 
 
@@ -131,8 +132,8 @@ def test_with_map_replaces_one_scene_and_leaves_the_others_and_the_old_stack(sma
     _, per_before = stack.score(truth)
     new = np.ascontiguousarray(np.flipud(scenes[1].event_map))  # the same counts, in the wrong place
     prepared = []
-    real = engine._stack_maps
-    monkeypatch.setattr(engine, "_stack_maps", lambda raw, *a, **k: prepared.append(len(raw)) or real(raw, *a, **k))
+    real = engine.stack_maps
+    monkeypatch.setattr(engine, "stack_maps", lambda raw, *a, **k: prepared.append(len(raw)) or real(raw, *a, **k))
     swapped = stack.with_map(1, new)
     assert prepared == [1]  # only the new map was prepared again
     _, per_after = swapped.score(truth)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..objective import CLIP, prepare_map
+from ..score_maps import CLIP, prepare_map
 from ..scenes import Scene
 from .overlay import grey_rgb, intensity_colors, normalise_map
 

@@ -24,7 +24,7 @@ import numpy as np
 from ..camera import CameraModel
 from ..drawing import color_table, depth_colors, disc_offsets, disc_size, draw_points, point_table  # noqa: F401
 from ..geometry import Extrinsic, in_image, project_points
-from ..objective import CLIP
+from ..score_maps import CLIP
 
 COLOR_MODES = ("intensity", "depth")
 COMPARE_MODES = ("side by side", "swipe", "blend")

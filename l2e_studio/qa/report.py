@@ -22,7 +22,7 @@ from .. import __version__
 from ..calibrate import CalibrationSettings, stack_scenes
 from ..export import EXPORT_FORMATS, export_status, export_text
 from ..geometry import Extrinsic
-from ..objective import CLIP
+from ..score_maps import CLIP
 from ..scenes import SceneSet
 from . import AXES, UNITS, figures, guardrails
 from .heldout import Candidate, ScoreTable, score

@@ -197,9 +197,9 @@ def open_executor(dask: str | None = None, workers: int | None = None, connect_t
 
 
 def _init_worker(threads: int) -> None:
-    from .. import objective
+    from .. import workers
 
-    objective.WORKERS = threads
+    workers.WORKERS = threads
 
 
 def run_study(

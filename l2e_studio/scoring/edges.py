@@ -14,7 +14,8 @@ brightness edges in the image. This module holds both sides of that score:
   2 deg apart, so a horizontal edge is located only to within that, and adding them (in inverse
   range, which cancels the ground's steady change between rings) let poses 0.5 deg off the
   reference outscore it on two of the four single-scene rigs.
-* :func:`edge_map`: the image's gradient magnitude, normalised by its 99th percentile (contrast
+* :func:`edge_map`: the image's gradient across the lidar's scan lines (the only edges a scan
+  that compares horizontal neighbours can match), normalised by its 99th percentile (contrast
   does not matter, saturated sky has no gradient), smoothed at the stage's sigma and
   **band-passed** (its local mean removed), so that a textured region (foliage, gravel) scores
   about zero wherever points land on it and only edges that line up precisely count.
@@ -115,21 +116,50 @@ def magnitude(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     return np.sqrt(gx * gx + gy * gy)
 
 
-def gradient_magnitude(image: np.ndarray) -> np.ndarray:
-    """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1."""
+def _sobel(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """d/du and d/dv of the image after a 1 px blur."""
     g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
-    m = magnitude(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+    return cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1)
+
+
+def _unit_p99(m: np.ndarray) -> np.ndarray:
+    """``m`` scaled so its 99th percentile is 1, clipped there (contrast does not matter)."""
     p99 = float(np.percentile(m, 99))
     if p99 <= 0:
         return np.zeros_like(m)
     return np.minimum(m / p99, 1.0)
 
 
-def edge_map(image: np.ndarray, sigma: float, size: tuple[int, int] | None = None) -> np.ndarray:
-    """The map the edge score reads: gradient magnitude, optionally resized to ``size`` (w, h),
-    smoothed with ``sigma`` (pixels of the output) and band-passed, stored as
-    ``OFFSET + SCALE * value`` in float32 (so that 0..255 holds it, OFFSET meaning no edge)."""
-    m = gradient_magnitude(image)
+def gradient_magnitude(image: np.ndarray) -> np.ndarray:
+    """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1
+    (every orientation: what the structure check's Canny edges see)."""
+    return _unit_p99(magnitude(*_sobel(image)))
+
+
+def scan_gradient(image: np.ndarray, scan: np.ndarray | None = None) -> np.ndarray:
+    """The image gradient along the lidar's scan lines, ``|grad . u|``, scaled so its 99th
+    percentile is 1; ``scan`` is the (H, W, 2) unit direction ``u`` of the scan lines at every
+    pixel (:func:`l2e_studio.score_maps.scan_directions`), ``None`` for the image rows.
+
+    The lidar side finds its edges between neighbours along a scan line only, so the image
+    edges it can line up with are those that cut across the scan lines; an edge that runs along
+    them (a horizon, a kerb, a shelf) is clutter the scan can never match and a pull on the
+    score toward wherever the rings happen to sit. Kept out, the sparse 16-beam rigs (rings a
+    degree or more apart) peak near their reference instead of degrees off it.
+    """
+    gx, gy = _sobel(image)
+    m = np.abs(gx) if scan is None else np.abs(gx * scan[..., 0] + gy * scan[..., 1])
+    return _unit_p99(m)
+
+
+def edge_map(
+    image: np.ndarray, sigma: float, size: tuple[int, int] | None = None, scan: np.ndarray | None = None
+) -> np.ndarray:
+    """The map the edge score reads: the gradient across the scan lines (:func:`scan_gradient`,
+    ``scan`` at the image's full resolution), optionally resized to ``size`` (w, h), smoothed
+    with ``sigma`` (pixels of the output) and band-passed, stored as ``OFFSET + SCALE * value``
+    in float32 (so that 0..255 holds it, OFFSET meaning no edge)."""
+    m = scan_gradient(image, scan)
     if size is not None and size != (m.shape[1], m.shape[0]):
         m = cv2.resize(m, size, interpolation=cv2.INTER_AREA)
     s = max(float(sigma), 0.5)
