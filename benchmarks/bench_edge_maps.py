@@ -72,6 +72,21 @@ def _anisotropic(vertical: float):
     return gradient
 
 
+def _centre(image, scan=None):
+    """The engine's, with the scan direction at the image centre everywhere (no curvature)."""
+    if scan is None:
+        return ENGINE(image)
+    h, w = scan.shape[:2]
+    return ENGINE(image, np.broadcast_to(scan[h // 2, w // 2], scan.shape))
+
+
+def _cos2(image, scan=None):
+    """|grad| cos² of its angle to the scan lines: an edge the rings cross obliquely counts less."""
+    gx, gy = _gradients(image)
+    along = np.abs(gx) if scan is None else np.abs(gx * scan[..., 0] + gy * scan[..., 1])
+    return _normalised(along * along / (edges.magnitude(gx, gy) + 1e-6))
+
+
 def _blur2(image, scan=None):
     return _normalised(edges.magnitude(*_gradients(image, 2.0)))
 
@@ -96,7 +111,7 @@ def _log(image, scan=None):
 
 
 VARIANTS = {"base": lambda image, scan=None: edges.gradient_magnitude(image), "blur2": _blur2, "gx": ENGINE,
-            "rows": _anisotropic(0.0), "a05": _anisotropic(0.5),
+            "rows": _anisotropic(0.0), "centre": _centre, "cos2": _cos2, "a05": _anisotropic(0.5),
             "a03": _anisotropic(0.3), "coh": _coh, "gxcoh": _gxcoh, "local": _local, "log": _log}
 
 
