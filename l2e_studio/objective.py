@@ -34,7 +34,7 @@ from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
 from .score_maps import CLIP, scan_directions, stack_maps
-from .workers import CHUNK, run_chunks, run_tasks
+from .pool import CHUNK, run_chunks, run_tasks
 
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
 

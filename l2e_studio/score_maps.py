@@ -24,7 +24,7 @@ from .camera import CameraModel
 from .geometry import Extrinsic, project_with_jacobian
 from .io.maps import MAP_CLIP
 from .scoring import edges
-from .workers import run_tasks
+from .pool import run_tasks
 
 #: Maps of accumulated events are clipped here (the paper); camera images keep their 0..255.
 CLIP = MAP_CLIP

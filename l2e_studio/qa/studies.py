@@ -197,9 +197,9 @@ def open_executor(dask: str | None = None, workers: int | None = None, connect_t
 
 
 def _init_worker(threads: int) -> None:
-    from .. import workers
+    from .. import pool
 
-    workers.WORKERS = threads
+    pool.WORKERS = threads
 
 
 def run_study(

@@ -1,4 +1,4 @@
-"""The worker threads the objective and the map preparation share.
+"""The engine's worker threads, shared by the objective and the map preparation.
 
 numpy and OpenCV release the GIL inside their loops, so independent slices of one evaluation
 (chunks of points, one map each) really run at once on the threads of one small pool.
