@@ -178,7 +178,7 @@ def stack_scenes(
 def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> CalibrationResult:
     t0 = time.perf_counter()
     if isinstance(scenes, SceneStack):
-        stack = scenes
+        stack = scenes.aimed_at(seed)
     elif camera is None:
         raise ValueError("camera is required when scenes are not stacked")
     else:

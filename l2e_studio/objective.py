@@ -37,6 +37,9 @@ from .score_maps import CLIP, scan_directions, stack_maps
 from .pool import CHUNK, run_chunks, run_tasks
 
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
+#: The edge maps are prepared again when the lidar's axis turns further than this (deg) from the
+#: extrinsic they were prepared for: the gradient then leaks at most sin(3 deg), 5 %, along the lines.
+SCAN_REAIM_DEG = 3.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,7 @@ class SceneStack:
     objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
     weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
     scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``edges``)
+    scan_axis: np.ndarray | None = None  # the lidar's z axis in the camera frame that ``scan`` was projected for
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -114,6 +118,7 @@ class SceneStack:
             objective_name=objective,
             weights=np.concatenate(weights) if objective == "edges" else None,
             scan=scan,
+            scan_axis=None if scan is None else reference.R[:, 2].copy(),
         )
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
@@ -125,6 +130,22 @@ class SceneStack:
         camera = full if scale == 1.0 else full.scaled(scale)
         maps = stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name, self.scan)
         return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
+
+    def aimed_at(self, extrinsic: Extrinsic) -> "SceneStack":
+        """The stack whose edge maps read across the scan lines as ``extrinsic`` projects them:
+        itself while the lidar's axis is within :data:`SCAN_REAIM_DEG` of the one its maps were
+        prepared for, else the same points over maps prepared again (a seed tuned far by hand, a
+        rig turned on its side, must not be scored across the old seed's scan lines)."""
+        if self.objective_name != "edges":
+            return self
+        axis = extrinsic.R[:, 2]
+        if self.scan_axis is not None and float(axis @ self.scan_axis) >= np.cos(np.radians(SCAN_REAIM_DEG)):
+            return self
+        full = self.full_camera or self.camera
+        scan = scan_directions(full, extrinsic)
+        maps = stack_maps(self.raw_maps, self.map_kinds, self.sigma, (self.camera.width, self.camera.height),
+                          self.objective_name, scan)
+        return replace(self, maps=maps, scan=scan, scan_axis=axis.copy())
 
     def with_map(self, index: int, raw_map: np.ndarray) -> "SceneStack":
         """The same stack with scene ``index``'s map replaced by ``raw_map`` (unprepared, full

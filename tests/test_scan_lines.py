@@ -160,3 +160,30 @@ def test_a_camera_on_its_side_scores_as_the_same_camera_upright() -> None:
     rows = SceneStack.build([side_scene], side_cam, 4.0, None, objective="edges")
     assert abs(rows.score(side_truth, per_scene=False)[0] - up.score(truth, per_scene=False)[0]) > \
         0.2 * abs(up.score(truth, per_scene=False)[0])
+
+
+def test_a_seed_turned_far_from_the_stacks_prepares_the_edge_maps_again() -> None:
+    """The app's readout (and the optimiser it hands its stack to) reads across the scan lines of
+    the extrinsic in hand: within 3 deg of the one the maps were prepared for they are kept; a
+    seed turned on its side gets the maps a stack built there has."""
+    from l2e_studio.app.readout import MiReadout
+
+    scene, _ = _scene(np.random.default_rng(6))
+    truth = _extrinsic(UPRIGHT)
+    stack = SceneStack.build([scene], PINHOLE, 4.0, truth, objective="edges")
+    near = truth.perturbed(np.zeros(3), np.radians([1.5, -1.0, 1.0]))
+    assert stack.aimed_at(near) is stack
+    turned = _extrinsic(Rotation.from_euler("z", 20, degrees=True).as_matrix() @ UPRIGHT)
+    aimed = stack.aimed_at(turned)
+    fresh = SceneStack.build([scene], PINHOLE, 4.0, turned, objective="edges")
+    assert aimed is not stack and np.array_equal(aimed.maps, fresh.maps)
+    assert np.array_equal(aimed.points, stack.points)  # the same points: only the maps follow the seed
+    assert aimed.aimed_at(turned) is aimed
+
+    readout = MiReadout([scene], PINHOLE, truth, 4.0)
+    before = readout.generation
+    readout.read(near, [True])
+    assert readout.generation == before
+    reading = readout.read(turned, [True])
+    assert readout.generation == before + 1
+    assert reading.total == pytest.approx(fresh.score(turned, per_scene=False)[0])

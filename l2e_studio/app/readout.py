@@ -79,8 +79,13 @@ class MiReadout:
             self.generation += 1
 
     def read(self, extrinsic: Extrinsic, included: Sequence[bool]) -> MiReading:
-        """MI of each scene and of the ``included`` scenes' histograms pooled together."""
+        """MI of each scene and of the ``included`` scenes' histograms pooled together (edge
+        maps prepared again for ``extrinsic`` when it turned the lidar's axis far from theirs)."""
         mask = np.asarray(included, dtype=bool)
         with self._lock:
+            aimed = self._stack.aimed_at(extrinsic)  # a seed tuned far from the first one
+            if aimed is not self._stack:
+                self._stack = aimed
+                self.generation += 1
             total, per_scene = self._stack.score(extrinsic, pooled=mask)
         return MiReading(extrinsic, float(total), np.asarray(per_scene, float), tuple(bool(b) for b in mask))
