@@ -71,10 +71,11 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
             for dt, dr in starts:
                 seed = rig.reference.perturbed(dt, dr)
                 t0 = time.perf_counter()
-                result = calibrate(stack, None, seed, settings)
+                aimed = stack.aimed_at(seed)  # edge maps read as the seed (not the reference) projects the scan lines
+                result = calibrate(aimed, None, seed, settings)
                 status, end = "-", result.extrinsic
                 if variant == "new":
-                    v = judge(stack, result, settings)
+                    v = judge(aimed, result, settings)
                     if with_boards is not None:
                         v = with_boards(v, seed)
                     status, end = v.status, v.extrinsic
