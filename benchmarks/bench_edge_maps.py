@@ -9,10 +9,10 @@ in view the error to the board solve (an independent reference of the same rig).
 
 Candidates (each normalised by its 99th percentile, as the engine's map is):
 
-* ``base``   the engine's until stop 28: Sobel magnitude after a 1 px blur;
+* ``base``   the engine's default: Sobel magnitude after a 1 px blur;
 * ``blur2``  the same after a 2 px blur (fine texture suppressed);
-* ``gx``     the engine's since stop 29: only the gradient across the scan lines (|d/du| on
-             upright rigs; the engine's own follows the rings as the seed projects them): the lidar finds
+* ``gx``     the engine's ``edge_gradient="scan-lines"`` (stop 29): only the gradient across the
+             scan lines (|d/du| on upright rigs; it follows the rings as the seed projects them): the lidar finds
              its edges between horizontal neighbours, so an image edge it can match has a
              horizontal gradient; horizontal image edges are clutter it can never line up;
 * ``rows``   |d/du| whatever the rig (stop 28's ``gx``, before it followed the rings);
@@ -144,10 +144,10 @@ def board_solve(rig):
 
 
 def run(rig, variant: str, seeds: int, board) -> dict:
-    settings = CalibrationSettings()
+    settings = CalibrationSettings(edge_gradient="scan-lines")  # the engine's gradient step is the one swapped
     with gradient(variant):
         stack = stack_scenes(rig.scenes, rig.camera, rig.reference,
-                             CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0))
+                             CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0, edge_gradient="scan-lines"))
         final = stack.with_sigma(settings.sigma)
         at_ref = final.score(rig.reference, per_scene=False)[0]
         ends = []
@@ -196,7 +196,7 @@ def main() -> None:
 
             for variant in args.variants.split(","):
                 with gradient(variant):
-                    rows += [dict(r, engine=variant) for r in run_rig(rig, args.verdict, list(LEVELS.values()), ["new"])]
+                    rows += [dict(r, engine=variant) for r in run_rig(rig, args.verdict, list(LEVELS.values()), ["scan"])]
             continue
         board = board_solve(rig)
         for variant in args.variants.split(","):

@@ -3,7 +3,9 @@
 Per rig and seed level (1 deg / 5 cm, 2 deg / 10 cm, 5 deg / 20 cm; random axis and direction,
 fixed RNG), calibrate from reference-perturbed seeds with
 * ``mi``: the paper's MI, no verdict (the tool before the structure-aware objective), and
-* ``new``: the default (objective chosen from the map kind, multi-start, verdict).
+* ``new``: the default (objective chosen from the map kind, multi-start, verdict), and
+* ``scan``: the same with the edge maps reading the gradient across the scan lines only
+  (``edge_gradient="scan-lines"``).
 A run is *worse* when its rotation error grows by > 0.1 deg or its translation error by > 1 cm,
 *closer* when it is not worse and one of them shrinks by more than that, else *kept*.
 Also: runs started at the reference, and one-axis sweeps of the new objective (PNG).
@@ -23,6 +25,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +37,10 @@ from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  #
 from l2e_studio.verdict import judge  # noqa: E402
 
 LEVELS = {1: (1.0, 0.05), 2: (2.0, 0.10), 5: (5.0, 0.20), 0: (0.0, 0.0)}
+#: the engines compared: the paper's MI without a verdict, the default engine, and the default
+#: with the edge maps reading the gradient across the scan lines only
+VARIANTS = {"mi": CalibrationSettings(objective="mi", global_search=False), "new": CalibrationSettings(),
+            "scan": CalibrationSettings(edge_gradient="scan-lines")}
 OUT = Path(__file__).resolve().parent / "out"
 
 
@@ -59,12 +66,11 @@ def board_evidence(rig):
 
 def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict]:
     rows = []
-    with_boards = board_evidence(rig) if boards and "new" in variants else None
-    wide = CalibrationSettings(translation_bound=0.5, rotation_bound_deg=20.0)
+    with_boards = board_evidence(rig) if boards and set(variants) - {"mi"} else None
     for variant in variants:
-        settings = CalibrationSettings(objective="mi", global_search=False) if variant == "mi" else CalibrationSettings()
-        stack = stack_scenes(rig.scenes, rig.camera, rig.reference, wide if variant == "new" else
-                             CalibrationSettings(objective="mi", translation_bound=0.5, rotation_bound_deg=20.0))
+        settings = VARIANTS[variant]
+        stack = stack_scenes(rig.scenes, rig.camera, rig.reference,
+                             replace(settings, translation_bound=0.5, rotation_bound_deg=20.0))
         for deg, m in levels:
             li = list(LEVELS.values()).index((deg, m))  # the same seeds whichever levels run
             starts = perturbations(runs, deg, m, 1000 + li) if deg > 0 else [(np.zeros(3), np.zeros(3))] * 2
@@ -74,26 +80,26 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
                 aimed = stack.aimed_at(seed)  # edge maps read as the seed (not the reference) projects the scan lines
                 result = calibrate(aimed, None, seed, settings)
                 status, end = "-", result.extrinsic
-                if variant == "new":
+                if variant != "mi":
                     v = judge(aimed, result, settings)
                     if with_boards is not None:
                         v = with_boards(v, seed)
                     status, end = v.status, v.extrinsic
                 seconds = time.perf_counter() - t0
                 se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
-                unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if variant == "new" else []
-                spread = getattr(v, "spread", None) if variant == "new" else None
+                unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if variant != "mi" else []
+                spread = getattr(v, "spread", None) if variant != "mi" else None
                 oe, move = result.extrinsic.error_to(rig.reference), seed.error_to(result.extrinsic)
                 rows.append(dict(rig=rig.name, variant=variant, unpinned="".join(unpinned), level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
                                  end_deg=ee[0], end_m=ee[1], cls=classify(se, ee), status=status, seconds=seconds,
                                  opt_deg=oe[0], opt_m=oe[1], move_deg=move[0], move_m=move[1],
                                  spread_deg=None if spread is None else spread.deg,
                                  spread_m=None if spread is None or np.isnan(spread.m) else spread.m,
-                                 settled=getattr(v, "settled", "") if variant == "new" else "",
+                                 settled=getattr(v, "settled", "") if variant != "mi" else "",
                                  # for studying the verdict's rules offline: each check's outcome, each
                                  # axis's probe drop, and the optimiser's translation error per camera axis
-                                 checks={c.name: c.passed for c in v.checks} if variant == "new" else {},
-                                 drops=[a.drop for a in v.translation] if variant == "new" else [],
+                                 checks={c.name: c.passed for c in v.checks} if variant != "mi" else {},
+                                 drops=[a.drop for a in v.translation] if variant != "mi" else [],
                                  opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist()))
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
                       f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "
@@ -119,7 +125,7 @@ def table(rows: list[dict], label: str = "") -> str:
         if variant != "mi":
             st = "/".join(str(sum(r["status"] == s for r in sel)) for s in ("trusted", "trusted-rotation", "not-trusted"))
             trusted_worse = str(sum(r["status"] != "not-trusted" and r["cls"] == "worse" for r in sel))
-        name = "paper MI, no verdict" if variant == "mi" else (engine or "auto + verdict")
+        name = "paper MI, no verdict" if variant == "mi" else (engine or {"new": "auto + verdict"}.get(variant, variant))
         lines.append(f"| {rig} | {level} | {name} | {c['closer']} | {c['kept']} | {c['worse']} | {med} | {st} | {trusted_worse} |")
     return "\n".join(lines)
 
@@ -159,7 +165,7 @@ def main() -> None:
     p.add_argument("--runs", type=int, default=20, help="runs per rig and seed level (0: none, e.g. with --sweeps)")
     p.add_argument("--rigs", default="all")
     p.add_argument("--levels", default="1,2,5,0", help="seed levels: 1 (1 deg / 5 cm), 2, 5, 0 (the reference)")
-    p.add_argument("--variants", default="mi,new")
+    p.add_argument("--variants", default="mi,new", help=f"engines: {', '.join(VARIANTS)}")
     p.add_argument("--sweeps", action="store_true")
     p.add_argument("--boards", action="store_true",
                    help="rigs with a target.yaml: the boards in view must agree with a trusted result")

@@ -36,6 +36,7 @@ from .geometry import Extrinsic
 from .objective import MapObjective, SceneStack, single_threaded_blas
 from .scenes import Scene
 from .scoring import OBJECTIVES, objective_for
+from .scoring.edges import GRADIENTS
 
 METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
 GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
@@ -71,12 +72,15 @@ class CalibrationSettings:
     stages: tuple[Stage, ...] | None = None  # overrides the schedule derived from sigma
     objective: str = "auto"  # "mi", "edges", or "auto": chosen from the map kinds (scoring.objective_for)
     global_search: bool | None = None  # multi-start from a rotation grid; None: for the edges objective
+    edge_gradient: str = "magnitude"  # what the edge maps read: "magnitude" or "scan-lines" (scoring.edges.GRADIENTS)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"unknown optimiser {self.method!r}; expected one of {', '.join(METHODS)}")
         if self.objective != "auto" and self.objective not in OBJECTIVES:
             raise ValueError(f"unknown objective {self.objective!r}; expected auto or one of {', '.join(OBJECTIVES)}")
+        if self.edge_gradient not in GRADIENTS:
+            raise ValueError(f"unknown edge gradient {self.edge_gradient!r}; expected one of {', '.join(GRADIENTS)}")
         if self.translation_bound < 0 or self.rotation_bound_deg <= 0:
             raise ValueError("bounds must be positive")
         if self.sigma < 0:
@@ -171,7 +175,8 @@ def stack_scenes(
     twice the bounds around ``seed`` are left out."""
     objective = objective_for([sc.map_kind for sc in scenes], settings.objective)
     return SceneStack.build(
-        scenes, camera, settings.sigma, seed, 2 * settings.translation_bound, 2 * settings.rotation_bound_deg, objective
+        scenes, camera, settings.sigma, seed, 2 * settings.translation_bound, 2 * settings.rotation_bound_deg, objective,
+        settings.edge_gradient,
     )
 
 

@@ -33,7 +33,7 @@ from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
-from .score_maps import CLIP, scan_directions, stack_maps
+from .score_maps import CLIP, rows, scan_directions, stack_maps
 from .pool import CHUNK, run_chunks, run_tasks
 
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
@@ -59,7 +59,8 @@ class SceneStack:
     full_camera: CameraModel | None = None
     objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
     weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
-    scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``edges``)
+    gradient: str = "magnitude"  # what the edge maps read (``scoring.edges.GRADIENTS``)
+    scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``scan-lines``)
     scan_axis: np.ndarray | None = None  # the lidar's z axis in the camera frame that ``scan`` was projected for
 
     # --- construction ------------------------------------------------------------------
@@ -73,16 +74,20 @@ class SceneStack:
         reach_m: float = 0.5,
         reach_deg: float = 20.0,
         objective: str = "mi",
+        gradient: str = "magnitude",
     ) -> "SceneStack":
         """Stack ``scenes`` for ``objective`` (``mi`` or ``edges``); with a ``reference``
         extrinsic, drop points that cannot reach the image for any extrinsic within
         ``reach_m`` / ``reach_deg`` of it (an over-estimate). For ``edges`` only the points on
-        lidar edges are kept, with their weights, and the image gradient is read across the
-        scan lines as the ``reference`` projects them (without one: across the image rows)."""
+        lidar edges are kept, with their weights; with ``gradient="scan-lines"`` the image
+        gradient is read across the scan lines as the ``reference`` projects them (without one:
+        across the image rows)."""
         if not scenes:
             raise ValueError("no scenes to stack")
         if objective not in OBJECTIVES:
             raise ValueError(f"unknown objective {objective!r}; expected one of {', '.join(OBJECTIVES)}")
+        if gradient not in edges.GRADIENTS:
+            raise ValueError(f"unknown edge gradient {gradient!r}; expected one of {', '.join(edges.GRADIENTS)}")
         pts, bins, owner, weights = [], [], [], []
         for i, sc in enumerate(scenes):
             if sc.event_map.shape != (camera.height, camera.width):
@@ -103,7 +108,9 @@ class SceneStack:
             owner.append(np.full(len(pts[-1]), i, dtype=np.int32))
         raw = tuple(np.asarray(sc.event_map, dtype=np.float32) for sc in scenes)
         kinds = tuple(sc.map_kind for sc in scenes)
-        scan = scan_directions(camera, reference) if objective == "edges" and reference is not None else None
+        scan = None
+        if objective == "edges" and gradient == "scan-lines":
+            scan = scan_directions(camera, reference) if reference is not None else rows(camera)
         return cls(
             camera=camera,
             names=tuple(sc.name for sc in scenes),
@@ -117,8 +124,9 @@ class SceneStack:
             full_camera=camera,
             objective_name=objective,
             weights=np.concatenate(weights) if objective == "edges" else None,
+            gradient=gradient,
             scan=scan,
-            scan_axis=None if scan is None else reference.R[:, 2].copy(),
+            scan_axis=None if scan is None or reference is None else reference.R[:, 2].copy(),
         )
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
@@ -136,7 +144,7 @@ class SceneStack:
         itself while the lidar's axis is within :data:`SCAN_REAIM_DEG` of the one its maps were
         prepared for, else the same points over maps prepared again (a seed tuned far by hand, a
         rig turned on its side, must not be scored across the old seed's scan lines)."""
-        if self.objective_name != "edges":
+        if self.scan is None:  # the edge maps read every orientation (or the stack is MI's)
             return self
         axis = extrinsic.R[:, 2]
         if self.scan_axis is not None and float(axis @ self.scan_axis) >= np.cos(np.radians(SCAN_REAIM_DEG)):

@@ -1,12 +1,12 @@
 """The maps the scores read, prepared from the scenes' raw maps.
 
 * For the paper's MI (accumulated event maps): clipped at the kind's ceiling and smoothed.
-* For the edge score (camera images): the image gradient across the lidar's scan lines,
-  smoothed and band-passed (:func:`l2e_studio.scoring.edges.edge_map`). Which way the scan lines
-  run in the image is the seed's business, not the image's: :func:`scan_directions` projects
-  the lidar's rings through the seed extrinsic and the lens, so a camera mounted on its side, a
-  tilted lidar or a fisheye (where the rings curve) read the gradient that crosses the rings
-  where they really run.
+* For the edge score (camera images): the image gradient, smoothed and band-passed
+  (:func:`l2e_studio.scoring.edges.edge_map`); every orientation, or only across the lidar's
+  scan lines. Which way the scan lines run in the image is the seed's business, not the
+  image's: :func:`scan_directions` projects the lidar's rings through the seed extrinsic and
+  the lens, so a camera mounted on its side, a tilted lidar or a fisheye (where the rings
+  curve) read the gradient that crosses the rings where they really run.
 
 Every stacked map has a one-pixel border that reads "nothing" (zero counts for MI, "no edge"
 for edges), so a point that leaves the image cannot raise the score.
@@ -83,6 +83,13 @@ def scan_directions(camera: CameraModel, extrinsic: Extrinsic, grid: int = SCAN_
     return np.where(length > 1e-6, field / np.maximum(length, 1e-6), 0.0).astype(np.float32)
 
 
+def rows(camera: CameraModel) -> np.ndarray:
+    """The scan-line field of a lidar whose rings run along the image rows (no seed to project)."""
+    field = np.zeros((camera.height, camera.width, 2), np.float32)
+    field[..., 0] = 1.0
+    return field
+
+
 def _hat_weights(knots: np.ndarray, n: int) -> np.ndarray:
     """(n, k) weights of linear interpolation from values at ``knots`` to the points 0..n-1."""
     return np.stack([np.interp(np.arange(n), knots, row) for row in np.eye(len(knots))], axis=1)
@@ -109,7 +116,8 @@ def stack_maps(
 ) -> np.ndarray:
     """(S, h+2, w+2) float32: ``raw`` maps prepared for ``objective``, resized to ``size`` (w, h)
     before smoothing (``sigma`` in full-resolution pixels), with a one-pixel border that reads
-    "nothing". ``scan`` is the full-resolution scan direction field of the edge score."""
+    "nothing". ``scan``: the full-resolution scan direction field, for edge maps that read the
+    gradient across the scan lines only."""
     h, w = raw[0].shape
     out_w, out_h = size or (w, h)
     factor = out_w / w

@@ -147,8 +147,8 @@ def test_a_camera_on_its_side_scores_as_the_same_camera_upright() -> None:
     side_scene = Scene(scene.name, scene.points, scene.intensity, side_img, "image")
     truth = _extrinsic(UPRIGHT)
     side_truth = _extrinsic(ON_ITS_SIDE @ UPRIGHT, ON_ITS_SIDE @ truth.translation)
-    up = SceneStack.build([scene], PINHOLE, 4.0, truth, objective="edges")
-    side = SceneStack.build([side_scene], side_cam, 4.0, side_truth, objective="edges")
+    up = SceneStack.build([scene], PINHOLE, 4.0, truth, objective="edges", gradient="scan-lines")
+    side = SceneStack.build([side_scene], side_cam, 4.0, side_truth, objective="edges", gradient="scan-lines")
     assert np.abs(np.rot90(up.maps[0]) - side.maps[0]).max() < 0.05 * edges.SCALE
     rng = np.random.default_rng(5)
     turn = np.eye(4)
@@ -157,7 +157,7 @@ def test_a_camera_on_its_side_scores_as_the_same_camera_upright() -> None:
         a = truth.perturbed(rng.normal(0, 0.03, 3), rng.normal(0, np.radians(1.0), 3))
         b = Extrinsic.from_matrix(turn @ a.matrix)
         assert up.score(a, per_scene=False)[0] == pytest.approx(side.score(b, per_scene=False)[0], rel=0.02, abs=1e-4)
-    rows = SceneStack.build([side_scene], side_cam, 4.0, None, objective="edges")
+    rows = SceneStack.build([side_scene], side_cam, 4.0, None, objective="edges", gradient="scan-lines")
     assert abs(rows.score(side_truth, per_scene=False)[0] - up.score(truth, per_scene=False)[0]) > \
         0.2 * abs(up.score(truth, per_scene=False)[0])
 
@@ -170,20 +170,39 @@ def test_a_seed_turned_far_from_the_stacks_prepares_the_edge_maps_again() -> Non
 
     scene, _ = _scene(np.random.default_rng(6))
     truth = _extrinsic(UPRIGHT)
-    stack = SceneStack.build([scene], PINHOLE, 4.0, truth, objective="edges")
+    stack = SceneStack.build([scene], PINHOLE, 4.0, truth, objective="edges", gradient="scan-lines")
     near = truth.perturbed(np.zeros(3), np.radians([1.5, -1.0, 1.0]))
     assert stack.aimed_at(near) is stack
     turned = _extrinsic(Rotation.from_euler("z", 20, degrees=True).as_matrix() @ UPRIGHT)
     aimed = stack.aimed_at(turned)
-    fresh = SceneStack.build([scene], PINHOLE, 4.0, turned, objective="edges")
+    fresh = SceneStack.build([scene], PINHOLE, 4.0, turned, objective="edges", gradient="scan-lines")
     assert aimed is not stack and np.array_equal(aimed.maps, fresh.maps)
     assert np.array_equal(aimed.points, stack.points)  # the same points: only the maps follow the seed
     assert aimed.aimed_at(turned) is aimed
 
-    readout = MiReadout([scene], PINHOLE, truth, 4.0)
+    readout = MiReadout([scene], PINHOLE, truth, 4.0, gradient="scan-lines")
     before = readout.generation
     readout.read(near, [True])
     assert readout.generation == before
     reading = readout.read(turned, [True])
     assert readout.generation == before + 1
     assert reading.total == pytest.approx(fresh.score(turned, per_scene=False)[0])
+
+
+def test_the_default_edge_map_reads_every_orientation_and_the_scan_lines_are_opted_into() -> None:
+    """The gradient across the scan lines is a setting (``edge_gradient="scan-lines"``): by
+    default the map reads the gradient magnitude, whatever the seed, and nothing is re-aimed."""
+    from l2e_studio.calibrate import CalibrationSettings, stack_scenes
+
+    scene, img = _scene(np.random.default_rng(7))
+    truth = _extrinsic(UPRIGHT)
+    default = stack_scenes([scene], PINHOLE, truth)
+    assert default.gradient == "magnitude" and default.scan is None
+    assert default.aimed_at(_extrinsic(ON_ITS_SIDE @ UPRIGHT)) is default
+    expected = edges.edge_map(img, default.sigma)
+    assert np.array_equal(default.maps[0, 1:-1, 1:-1], expected)
+    opted = stack_scenes([scene], PINHOLE, truth, CalibrationSettings(edge_gradient="scan-lines"))
+    assert opted.gradient == "scan-lines" and opted.scan is not None
+    assert not np.array_equal(opted.maps, default.maps)
+    with pytest.raises(ValueError, match="edge gradient"):
+        CalibrationSettings(edge_gradient="sobel")

@@ -42,14 +42,15 @@ class MiReadout:
     sigma changes."""
 
     def __init__(
-        self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0, objective: str = "auto"
+        self, scenes: Sequence[Scene], camera: CameraModel, reference: Extrinsic, sigma: float = 5.0, objective: str = "auto",
+        gradient: str = "magnitude",
     ) -> None:
         self._lock = threading.Lock()
         self.generation = 0  # counts changes of the stack's maps (sigma or a map)
         self._stack = SceneStack.build(
             scenes, camera, sigma, reference=reference,
             reach_m=READOUT_REACH_M, reach_deg=READOUT_REACH_DEG,
-            objective=objective_for([sc.map_kind for sc in scenes], objective),
+            objective=objective_for([sc.map_kind for sc in scenes], objective), gradient=gradient,
         )
 
     @property

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from ..scoring import OBJECTIVES
+from ..scoring.edges import GRADIENTS
 from ..errors import InputError
 from .outputs import check_output_file, save_fallback
 
@@ -44,6 +45,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
                    help="score to climb: mi (the paper's, for event maps), edges (lidar edges on image edges, for "
                         "camera images); auto picks from the map kind (default)")
+    p.add_argument("--edge-gradient", choices=GRADIENTS, default="magnitude",
+                   help="what the edge score reads in camera images: magnitude (every orientation, the default) or "
+                        "scan-lines (only the gradient across the lidar's rings: stronger on sparse lidars with "
+                        "several scenes, fooled more often where every scene shares a misleading structure)")
     p.add_argument("--map-kind", choices=("events", "image"),
                    help="treat every map as accumulated events or as a camera image (default: from file and content)")
     p.add_argument("--on-untrusted", choices=ON_UNTRUSTED, default="keep-seed",
@@ -203,6 +208,7 @@ def _settings(args: argparse.Namespace):
             rotation_only=args.rotation_only,
             coarse_to_fine=not args.single_stage,
             objective=args.objective,
+            edge_gradient=args.edge_gradient,
         )
     except ValueError as exc:
         raise InputError(None, str(exc)) from None

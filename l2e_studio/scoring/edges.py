@@ -14,9 +14,9 @@ brightness edges in the image. This module holds both sides of that score:
   2 deg apart, so a horizontal edge is located only to within that, and adding them (in inverse
   range, which cancels the ground's steady change between rings) let poses 0.5 deg off the
   reference outscore it on two of the four single-scene rigs.
-* :func:`edge_map`: the image's gradient across the lidar's scan lines (the only edges a scan
-  that compares horizontal neighbours can match), normalised by its 99th percentile (contrast
-  does not matter, saturated sky has no gradient), smoothed at the stage's sigma and
+* :func:`edge_map`: the image's gradient magnitude (or, opted into, its gradient across the
+  lidar's scan lines: the only edges a scan that compares horizontal neighbours can match),
+  normalised by its 99th percentile (contrast does not matter, saturated sky has no gradient), smoothed at the stage's sigma and
   **band-passed** (its local mean removed), so that a textured region (foliage, gravel) scores
   about zero wherever points land on it and only edges that line up precisely count.
 
@@ -39,6 +39,10 @@ DEPTH_JUMP_M = 0.2
 DEPTH_JUMP_REL = 0.02
 #: An intensity step of this many grey levels (of 255, scaled to the scan's own 5-95 % spread) gives full weight.
 INTENSITY_STEP = 60.0
+#: The image gradients the edge map can read: every orientation (the default), or only across the
+#: lidar's scan lines (:func:`scan_gradient`; stronger on sparse multi-scene rigs, and fooled
+#: more often where every scene shares a misleading structure: see benchmarks/results/realdata.md)
+GRADIENTS = ("magnitude", "scan-lines")
 #: Points lighter than this are no edge at all (and are left out of the objective).
 MIN_WEIGHT = 0.05
 #: The band-pass removes a local mean this many times wider than the stage's smoothing.
@@ -155,11 +159,12 @@ def scan_gradient(image: np.ndarray, scan: np.ndarray | None = None) -> np.ndarr
 def edge_map(
     image: np.ndarray, sigma: float, size: tuple[int, int] | None = None, scan: np.ndarray | None = None
 ) -> np.ndarray:
-    """The map the edge score reads: the gradient across the scan lines (:func:`scan_gradient`,
-    ``scan`` at the image's full resolution), optionally resized to ``size`` (w, h), smoothed
-    with ``sigma`` (pixels of the output) and band-passed, stored as ``OFFSET + SCALE * value``
-    in float32 (so that 0..255 holds it, OFFSET meaning no edge)."""
-    m = scan_gradient(image, scan)
+    """The map the edge score reads: the gradient magnitude, or with a ``scan`` field (at the
+    image's full resolution) the gradient across the scan lines (:func:`scan_gradient`);
+    optionally resized to ``size`` (w, h), smoothed with ``sigma`` (pixels of the output) and
+    band-passed, stored as ``OFFSET + SCALE * value`` in float32 (so that 0..255 holds it,
+    OFFSET meaning no edge)."""
+    m = gradient_magnitude(image) if scan is None else scan_gradient(image, scan)
     if size is not None and size != (m.shape[1], m.shape[0]):
         m = cv2.resize(m, size, interpolation=cv2.INTER_AREA)
     s = max(float(sigma), 0.5)
