@@ -137,6 +137,7 @@ class CalibrationResult:
     message: str = ""
     stages: tuple[Stage, ...] = ()  # the schedule that ran
     objective: str = "mi"  # the score climbed and reported in ``score_*``
+    edge_gradient: str = "magnitude"  # what the edge maps read (the stack's; meaningless for ``mi``)
     #: where each start of the global search ended, with its final score (empty without it)
     ends: tuple[tuple[Extrinsic, float], ...] = ()
     #: the calibration method: "targetless" (the score climb above) or "target" (a checkerboard,
@@ -217,6 +218,7 @@ def _calibrate(scenes, camera, seed, settings, on_progress, cancel) -> Calibrati
         message=message,
         stages=run.stages,
         objective=stack.objective_name,
+        edge_gradient=stack.gradient,
         ends=run.ends,
     )
 

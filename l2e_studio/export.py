@@ -79,6 +79,7 @@ def result_to_dict(
         },
         "score": {
             "objective": result.objective,
+            **({"edge_gradient": result.edge_gradient} if result.objective == "edges" else {}),
             "seed": float(result.score_seed),
             "result": float(result.score_result),
             "per_scene": [

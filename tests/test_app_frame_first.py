@@ -80,3 +80,23 @@ def test_a_scene_switch_sends_the_frame_before_the_tables_and_before_after(app, 
     assert all(frame < first(events, what, version) for what in ("scene table", "target table", "before/after", "readout"))
     assert "**" + app.state.scene_names[1] + "**" in app.scenes.table.content  # the table shows the new selection
     assert np.isfinite(app.reading.per_scene[1])
+
+
+def test_the_workbench_reads_and_climbs_the_edge_gradient_it_was_started_with(tmp_path):
+    """``serve --edge-gradient scan-lines``: the live score, the Optimise tab's settings and the
+    run's result all read the gradient across the scan lines."""
+    from l2e_studio.app.server import build_app
+    from l2e_studio.scenes import load_scene_folder
+
+    folder = write_small_scenes(tmp_path / "img", map_kind="image", n_scenes=2)
+    scene_set = load_scene_folder(folder)
+    a = build_app(scene_set, port=free_port(), out_dir=tmp_path / "out", edge_gradient="scan-lines")
+    try:
+        assert a.readout.stack.gradient == "scan-lines" and a.readout.stack.scan is not None
+        settings = a.run_settings()
+        assert settings.edge_gradient == "scan-lines"
+        a.start_run(settings)
+        wait_for(lambda: a.state.snapshot().result is not None, timeout=120)
+        assert a.state.snapshot().result.edge_gradient == "scan-lines"
+    finally:
+        a.stop()

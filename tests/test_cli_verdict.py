@@ -66,3 +66,22 @@ def test_photos_under_event_are_scored_as_images(tmp_path: Path) -> None:
     proc = run_cli("calibrate", "--scenes", folder, "--map-kind", "events", "--out", forced, "--quiet", "--no-verdict")
     assert proc.returncode == 0 and "note:" not in proc.stderr
     assert yaml.safe_load(forced.read_text())["score"]["objective"] == "mi"
+
+
+def test_the_edge_gradient_is_chosen_on_the_command_line_and_recorded(tmp_path: Path) -> None:
+    """``--edge-gradient scan-lines`` climbs maps of the gradient across the scan lines; the result
+    file says which gradient the edge score read, and the default is the magnitude."""
+    folder = write_dataset(tmp_path / "img", SynthConfig(n_scenes=2, width=320, height=180, points_per_scan=6000,
+                                                        seed=4, map_kind="image"))
+    docs = {}
+    for gradient in ("magnitude", "scan-lines"):
+        out = tmp_path / f"{gradient}.yaml"
+        args = ("--edge-gradient", gradient) if gradient != "magnitude" else ()
+        proc = run_cli("calibrate", "--scenes", folder, *args, "--out", out, "--quiet", "--no-verdict")
+        assert proc.returncode == 0, proc.stderr
+        docs[gradient] = yaml.safe_load(out.read_text())
+        assert docs[gradient]["score"]["edge_gradient"] == gradient
+    # the same seed, two different maps: the scores differ
+    assert docs["magnitude"]["score"]["seed"] != docs["scan-lines"]["score"]["seed"]
+    proc = run_cli("calibrate", "--scenes", folder, "--edge-gradient", "sobel", "--out", tmp_path / "x.yaml")
+    assert proc.returncode != 0 and "sobel" in proc.stderr

@@ -35,6 +35,7 @@ class Workbench(Protocol):
     camera: "CameraModel"
     displays: "Sequence[SceneDisplay]"
     readout: "MiReadout"
+    edge_gradient: str  # what the edge maps read (CalibrationSettings.edge_gradient)
     reading: "MiReading | None"
     out_dir: Path
 

@@ -56,7 +56,8 @@ DEFERRED_3D_SOURCES = frozenset({"sliders", "typed", "nudge", "gizmo-fine"})  # 
 class App:
     """A running workbench. Create with :func:`build_app`; stop with :meth:`stop`."""
 
-    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path, objective: str = "auto") -> None:
+    def __init__(self, scene_set: SceneSet, server: viser.ViserServer, out_dir: Path, objective: str = "auto",
+                 edge_gradient: str = "magnitude") -> None:
         self.scene_set = scene_set
         self.server = server
         self.camera = scene_set.camera
@@ -64,7 +65,9 @@ class App:
         self.state = SessionState(scene_set.names, reference=scene_set.seed)
         self.displays = [SceneDisplay(s) for s in scene_set.scenes]
         # The readout smooths the maps like the optimiser's default; the sigma field updates both.
-        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma, objective)
+        self.edge_gradient = edge_gradient  # what the edge maps read (CalibrationSettings.edge_gradient)
+        self.readout = MiReadout(scene_set.scenes, self.camera, scene_set.seed, CalibrationSettings().sigma, objective,
+                                 edge_gradient)
         self.reading: MiReading | None = None
         self.maps = EventMapSession(self)  # rebuilding maps from raw events, the recordings' lengths
         self.result_maps: dict[str, dict] = {}  # how each map was made when the last result's run started
@@ -366,13 +369,15 @@ def build_app(
     out_dir: str | Path | None = None,
     verbose: bool = False,
     objective: str = "auto",
+    edge_gradient: str = "magnitude",
 ) -> App:
     """Start a viser server on ``host:port`` and build the workbench on it; ``objective`` is
-    the score read out and climbed (``auto``: from the map kind)."""
+    the score read out and climbed (``auto``: from the map kind), ``edge_gradient`` what its
+    edge maps read."""
     server = viser.ViserServer(host=host, port=port, label=TITLE, verbose=verbose)
     out = Path(out_dir) if out_dir is not None else default_results_dir(scene_set.root)
     try:
-        return App(scene_set, server, out, objective)
+        return App(scene_set, server, out, objective, edge_gradient)
     except BaseException:
         server.stop()
         raise
@@ -386,9 +391,10 @@ def serve(
     on_ready: Callable[[App], None] | None = None,
     stop: threading.Event | None = None,
     objective: str = "auto",
+    edge_gradient: str = "magnitude",
 ) -> None:
     """Serve until interrupted (or until ``stop`` is set)."""
-    app = build_app(scene_set, host, port, out_dir, objective=objective)
+    app = build_app(scene_set, host, port, out_dir, objective=objective, edge_gradient=edge_gradient)
     if on_ready is not None:
         on_ready(app)
     try:

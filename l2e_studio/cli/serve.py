@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..scoring import OBJECTIVES
+from ..scoring.edges import GRADIENTS
 
 #: Seconds a host name may take to resolve before --host is reported as unresolvable.
 RESOLVE_TIMEOUT_S = 5.0
@@ -29,6 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
                         help="score read out and climbed: mi (event maps), edges (camera images); auto picks from the "
                              "map kind (default)")
+    parser.add_argument("--edge-gradient", choices=GRADIENTS, default="magnitude",
+                        help="what the edge score reads in camera images: magnitude (default) or scan-lines (only the "
+                             "gradient across the lidar's rings; see l2e-studio calibrate --help)")
     parser.add_argument("--map-kind", choices=("events", "image"),
                         help="treat every map as accumulated events or as a camera image (default: from file and content)")
     parser.add_argument("--out", type=Path, default=None,
@@ -73,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out if args.out is not None or args.scenes is not None else Path("l2e_results")
     try:
-        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready, objective=args.objective)
+        serve(scene_set, host=args.host, port=args.port, out_dir=args.out, on_ready=ready, objective=args.objective,
+              edge_gradient=args.edge_gradient)
     except OSError as exc:
         raise InputError(None, f"cannot serve on {args.host}:{args.port} ({exc.strerror or exc})") from None
     return 0

@@ -147,6 +147,7 @@ class OptimisePanel:
             sigma=float(sigma.value),
             rotation_only=bool(self.rotation_only.value),
             coarse_to_fine=bool(self.coarse.value),
+            edge_gradient=self.app.edge_gradient,
         )
 
     def _on_start(self, event) -> None:

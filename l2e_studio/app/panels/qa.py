@@ -63,7 +63,7 @@ class QAPanel:
         try:
             return self.app.run_settings()
         except Exception:
-            return CalibrationSettings()
+            return CalibrationSettings(edge_gradient=self.app.edge_gradient)
 
     def score_now(self):
         snap = self.app.state.snapshot()
