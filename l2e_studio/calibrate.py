@@ -35,8 +35,7 @@ from .camera import CameraModel
 from .geometry import Extrinsic
 from .objective import MapObjective, SceneStack, single_threaded_blas
 from .scenes import Scene
-from .scoring import OBJECTIVES, objective_for
-from .scoring.edges import GRADIENTS
+from .scoring import EDGE_GRADIENTS, OBJECTIVES, objective_for
 
 METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
 GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
@@ -72,15 +71,15 @@ class CalibrationSettings:
     stages: tuple[Stage, ...] | None = None  # overrides the schedule derived from sigma
     objective: str = "auto"  # "mi", "edges", or "auto": chosen from the map kinds (scoring.objective_for)
     global_search: bool | None = None  # multi-start from a rotation grid; None: for the edges objective
-    edge_gradient: str = "magnitude"  # what the edge maps read: "magnitude" or "scan-lines" (scoring.edges.GRADIENTS)
+    edge_gradient: str = "magnitude"  # what the edge maps read: "magnitude" or "scan-lines" (scoring.EDGE_GRADIENTS)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"unknown optimiser {self.method!r}; expected one of {', '.join(METHODS)}")
         if self.objective != "auto" and self.objective not in OBJECTIVES:
             raise ValueError(f"unknown objective {self.objective!r}; expected auto or one of {', '.join(OBJECTIVES)}")
-        if self.edge_gradient not in GRADIENTS:
-            raise ValueError(f"unknown edge gradient {self.edge_gradient!r}; expected one of {', '.join(GRADIENTS)}")
+        if self.edge_gradient not in EDGE_GRADIENTS:
+            raise ValueError(f"unknown edge gradient {self.edge_gradient!r}; expected one of {', '.join(EDGE_GRADIENTS)}")
         if self.translation_bound < 0 or self.rotation_bound_deg <= 0:
             raise ValueError("bounds must be positive")
         if self.sigma < 0:

@@ -28,7 +28,7 @@ from threadpoolctl import threadpool_limits
 from .camera import CameraModel
 from .geometry import Extrinsic, distort, in_image, left_jacobian, project_points
 from . import compiled
-from .scoring import OBJECTIVES
+from .scoring import EDGE_GRADIENTS, OBJECTIVES
 from .scoring import edges
 from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
@@ -59,7 +59,7 @@ class SceneStack:
     full_camera: CameraModel | None = None
     objective_name: str = "mi"  # what the maps are prepared for and :meth:`score` reports
     weights: np.ndarray | None = None  # (N,) float32 edge weights (the ``edges`` objective)
-    gradient: str = "magnitude"  # what the edge maps read (``scoring.edges.GRADIENTS``)
+    gradient: str = "magnitude"  # what the edge maps read (``scoring.EDGE_GRADIENTS``)
     scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``scan-lines``)
     scan_axis: np.ndarray | None = None  # the lidar's z axis in the camera frame that ``scan`` was projected for
 
@@ -86,8 +86,8 @@ class SceneStack:
             raise ValueError("no scenes to stack")
         if objective not in OBJECTIVES:
             raise ValueError(f"unknown objective {objective!r}; expected one of {', '.join(OBJECTIVES)}")
-        if gradient not in edges.GRADIENTS:
-            raise ValueError(f"unknown edge gradient {gradient!r}; expected one of {', '.join(edges.GRADIENTS)}")
+        if gradient not in EDGE_GRADIENTS:
+            raise ValueError(f"unknown edge gradient {gradient!r}; expected one of {', '.join(EDGE_GRADIENTS)}")
         pts, bins, owner, weights = [], [], [], []
         for i, sc in enumerate(scenes):
             if sc.event_map.shape != (camera.height, camera.width):

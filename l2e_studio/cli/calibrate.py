@@ -9,8 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..scoring import OBJECTIVES
-from ..scoring.edges import GRADIENTS
+from ..scoring import EDGE_GRADIENTS, OBJECTIVES
 from ..errors import InputError
 from .outputs import check_output_file, save_fallback
 
@@ -45,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
                    help="score to climb: mi (the paper's, for event maps), edges (lidar edges on image edges, for "
                         "camera images); auto picks from the map kind (default)")
-    p.add_argument("--edge-gradient", choices=GRADIENTS, default="magnitude",
+    p.add_argument("--edge-gradient", choices=EDGE_GRADIENTS, default="magnitude",
                    help="what the edge score reads in camera images: magnitude (every orientation, the default) or "
                         "scan-lines (only the gradient across the lidar's rings: stronger on sparse lidars with "
                         "several scenes, fooled more often where every scene shares a misleading structure)")

@@ -6,8 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..scoring import OBJECTIVES
-from ..scoring.edges import GRADIENTS
+from ..scoring import EDGE_GRADIENTS, OBJECTIVES
 
 #: Seconds a host name may take to resolve before --host is reported as unresolvable.
 RESOLVE_TIMEOUT_S = 5.0
@@ -30,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objective", choices=("auto", *OBJECTIVES), default="auto",
                         help="score read out and climbed: mi (event maps), edges (camera images); auto picks from the "
                              "map kind (default)")
-    parser.add_argument("--edge-gradient", choices=GRADIENTS, default="magnitude",
+    parser.add_argument("--edge-gradient", choices=EDGE_GRADIENTS, default="magnitude",
                         help="what the edge score reads in camera images: magnitude (default) or scan-lines (only the "
                              "gradient across the lidar's rings; see l2e-studio calibrate --help)")
     parser.add_argument("--map-kind", choices=("events", "image"),

@@ -13,6 +13,11 @@ from __future__ import annotations
 from typing import Iterable
 
 OBJECTIVES = ("mi", "edges")
+#: What the edge score's image maps read: every orientation (the default), or only the gradient
+#: across the lidar's scan lines (:func:`.edges.scan_gradient`; stronger on sparse multi-scene
+#: rigs, fooled more often where every scene shares a misleading structure:
+#: benchmarks/results/realdata.md). Here, not in :mod:`.edges`, so ``--help`` imports no numpy.
+EDGE_GRADIENTS = ("magnitude", "scan-lines")
 
 
 def objective_for(map_kinds: Iterable[str], requested: str = "auto") -> str:

@@ -39,10 +39,6 @@ DEPTH_JUMP_M = 0.2
 DEPTH_JUMP_REL = 0.02
 #: An intensity step of this many grey levels (of 255, scaled to the scan's own 5-95 % spread) gives full weight.
 INTENSITY_STEP = 60.0
-#: The image gradients the edge map can read: every orientation (the default), or only across the
-#: lidar's scan lines (:func:`scan_gradient`; stronger on sparse multi-scene rigs, and fooled
-#: more often where every scene shares a misleading structure: see benchmarks/results/realdata.md)
-GRADIENTS = ("magnitude", "scan-lines")
 #: Points lighter than this are no edge at all (and are left out of the objective).
 MIN_WEIGHT = 0.05
 #: The band-pass removes a local mean this many times wider than the stage's smoothing.
