@@ -206,6 +206,27 @@ def distort(x: np.ndarray, y: np.ndarray, camera: CameraModel, jacobian: bool = 
         return _distort_radtan(x, y, D.astype(x.dtype), jacobian)
 
 
+def undistort_normalised(uv: np.ndarray, camera: CameraModel, iterations: int = 30) -> np.ndarray:
+    """(N, 2) pixels -> normalised undistorted coordinates (X/Z, Y/Z): Newton's method on the
+    project's own lens model (:func:`distort`, radtan or equidistant), so a board pose or a
+    pixel's ray comes from exactly the model the lidar points are projected with."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = camera.K
+    yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
+    xd = (uv[:, 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
+    x, y = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        fx, fy, (a, b, c, d) = distort(x, y, camera, jacobian=True)
+        ex, ey = fx - xd, fy - yd
+        det = a * d - b * c
+        det = np.where(np.abs(det) < 1e-12, 1e-12, det)
+        dx, dy = (d * ex - b * ey) / det, (a * ey - c * ex) / det
+        x, y = x - dx, y - dy
+        if np.max(np.abs(dx) + np.abs(dy)) < 1e-12:
+            break
+    return np.column_stack([x, y])
+
+
 def project_points(points_cam: np.ndarray, camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     """Project camera-frame points to pixels.
 

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from .camera import CameraModel
-from .geometry import Extrinsic, project_with_jacobian
+from .geometry import Extrinsic, project_with_jacobian, undistort_normalised
 from .io.maps import MAP_CLIP
 from .scoring import edges
 from .pool import run_tasks
@@ -51,16 +51,17 @@ def scan_directions(camera: CameraModel, extrinsic: Extrinsic, grid: int = SCAN_
     A spinning lidar's rings are cones about its z axis, and the edge weights compare neighbours
     in azimuth about that axis; at a pixel whose ray is ``r`` (camera frame) the ring runs along
     ``a x r`` (``a`` the lidar's z axis in the camera frame), which the lens's Jacobian carries
-    into the image. Rays come from OpenCV's undistortion, on a grid every ``grid`` pixels, and
-    the field is interpolated between them. Where the ray runs along the lidar's axis (no ring
-    passes) the direction is zero: no edge can be matched there.
+    into the image. Rays come from the lens model's own inverse (:func:`undistort_normalised`,
+    the one the board solve uses) on a grid every ``grid`` pixels, and the field is
+    interpolated between them. Where the ray runs along the lidar's axis (no ring passes) the
+    direction is zero: no edge can be matched there.
     """
     W, H = camera.width, camera.height
     us = np.unique(np.r_[np.arange(0, W, grid), W - 1]).astype(np.float64)
     vs = np.unique(np.r_[np.arange(0, H, grid), H - 1]).astype(np.float64)
     uu, vv = np.meshgrid(us, vs)
     px = np.stack([uu.ravel(), vv.ravel()], axis=1)
-    rays = np.column_stack([_normalised_coordinates(px, camera), np.ones(len(px))])
+    rays = np.column_stack([undistort_normalised(px, camera), np.ones(len(px))])
     axis = extrinsic.R[:, 2]
     uv, _, J = project_with_jacobian(rays, camera)
     d = np.einsum("nij,nj->ni", J, np.cross(axis, rays))
@@ -93,17 +94,6 @@ def rows(camera: CameraModel) -> np.ndarray:
 def _hat_weights(knots: np.ndarray, n: int) -> np.ndarray:
     """(n, k) weights of linear interpolation from values at ``knots`` to the points 0..n-1."""
     return np.stack([np.interp(np.arange(n), knots, row) for row in np.eye(len(knots))], axis=1)
-
-
-def _normalised_coordinates(px: np.ndarray, camera: CameraModel) -> np.ndarray:
-    """(N, 2) undistorted normalised image coordinates ``(X/Z, Y/Z)`` of pixel positions."""
-    pts = np.ascontiguousarray(px, dtype=np.float64).reshape(-1, 1, 2)
-    if camera.model == "equidistant" and camera.is_distorted:
-        out = cv2.fisheye.undistortPoints(pts, camera.K, camera.D)
-    else:
-        out = cv2.undistortPoints(pts, camera.K, camera.D if camera.is_distorted else None, None, None, None,
-                                  (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
-    return out.reshape(-1, 2)
 
 
 def stack_maps(

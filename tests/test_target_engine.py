@@ -15,7 +15,7 @@ from l2e_studio.errors import InputError
 from l2e_studio.geometry import Extrinsic, project_points
 from l2e_studio.target import (Board, TargetFrame, closed_form, crop_board, detect_board, load_target,
                                observability, search_board, solve)
-from l2e_studio.target.detect import undistort_normalised
+from l2e_studio.geometry import undistort_normalised
 
 from conftest import REALDATA
 

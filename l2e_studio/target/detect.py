@@ -44,7 +44,7 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..cachedir import user_cache_dir
 from ..camera import CameraModel
-from ..geometry import Extrinsic, distort, project_points
+from ..geometry import Extrinsic, project_points, undistort_normalised
 from .board import Board
 from .event_lines import TRIALS as LINE_TRIALS
 from .event_lines import checker_picture, upscale
@@ -209,27 +209,6 @@ def _subpix_window(corners: np.ndarray, pattern: tuple[int, int]) -> int:
 def _to_original(corners: np.ndarray, scale: int) -> np.ndarray:
     """Pixel coordinates of an image upscaled ``scale`` x (cv2.resize centres) back to the original."""
     return (np.asarray(corners, dtype=np.float64) + 0.5) / scale - 0.5
-
-
-def undistort_normalised(uv: np.ndarray, camera: CameraModel, iterations: int = 30) -> np.ndarray:
-    """(N, 2) pixels -> normalised undistorted coordinates (X/Z, Y/Z): Newton's method on the
-    project's own lens model (:func:`l2e_studio.geometry.distort`, radtan or equidistant), so the
-    pose is solved under exactly the model the lidar points are projected with."""
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    K = camera.K
-    yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
-    xd = (uv[:, 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
-    x, y = xd.copy(), yd.copy()
-    for _ in range(iterations):
-        fx, fy, (a, b, c, d) = distort(x, y, camera, jacobian=True)
-        ex, ey = fx - xd, fy - yd
-        det = a * d - b * c
-        det = np.where(np.abs(det) < 1e-12, 1e-12, det)
-        dx, dy = (d * ex - b * ey) / det, (a * ey - c * ex) / det
-        x, y = x - dx, y - dy
-        if np.max(np.abs(dx) + np.abs(dy)) < 1e-12:
-            break
-    return np.column_stack([x, y])
 
 
 def board_pose(corners: np.ndarray, board: Board, camera: CameraModel) -> tuple[Extrinsic, float]:
