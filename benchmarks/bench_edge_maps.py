@@ -50,67 +50,55 @@ from realdata_rigs import load_rigs, perturbations, synthetic_rigs
 ENGINE = edges.scan_gradient
 
 
-def _normalised(m: np.ndarray) -> np.ndarray:
-    p99 = float(np.percentile(m, 99))
-    return np.zeros_like(m) if p99 <= 0 else np.minimum(m / p99, 1.0)
-
-
-def _gradients(image: np.ndarray, blur: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), blur)
-    return cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1)
-
-
 def _coherence(gx: np.ndarray, gy: np.ndarray, sigma: float = 2.0) -> np.ndarray:
     jxx, jyy, jxy = (cv2.GaussianBlur(a, (0, 0), sigma) for a in (gx * gx, gy * gy, gx * gy))
     return np.sqrt((jxx - jyy) ** 2 + 4 * jxy ** 2) / (jxx + jyy + 1e-6)
 
 
 def _anisotropic(vertical: float):
-    def gradient(image: np.ndarray, scan=None) -> np.ndarray:
-        gx, gy = _gradients(image)
-        return _normalised(edges.magnitude(gx, vertical * gy))
+    def gradient(image: np.ndarray, scan) -> np.ndarray:
+        gx, gy = edges.sobel(image)
+        return edges.unit_p99(edges.magnitude(gx, vertical * gy))
     return gradient
 
 
-def _centre(image, scan=None):
+def _centre(image, scan):
     """The engine's, with the scan direction at the image centre everywhere (no curvature)."""
-    if scan is None:
-        return ENGINE(image)
     h, w = scan.shape[:2]
     return ENGINE(image, np.broadcast_to(scan[h // 2, w // 2], scan.shape))
 
 
-def _cos2(image, scan=None):
+def _cos2(image, scan):
     """|grad| cos² of its angle to the scan lines: an edge the rings cross obliquely counts less."""
-    gx, gy = _gradients(image)
-    along = np.abs(gx) if scan is None else np.abs(gx * scan[..., 0] + gy * scan[..., 1])
-    return _normalised(along * along / (edges.magnitude(gx, gy) + 1e-6))
+    gx, gy = edges.sobel(image)
+    along = np.abs(gx * scan[..., 0] + gy * scan[..., 1])
+    return edges.unit_p99(along * along / (edges.magnitude(gx, gy) + 1e-6))
 
 
-def _blur2(image, scan=None):
-    return _normalised(edges.magnitude(*_gradients(image, 2.0)))
+def _blur2(image, scan):
+    return edges.unit_p99(edges.magnitude(*edges.sobel(image, 2.0)))
 
 
-def _coh(image, scan=None):
-    gx, gy = _gradients(image)
-    return _normalised(edges.magnitude(gx, gy) * _coherence(gx, gy))
+def _coh(image, scan):
+    gx, gy = edges.sobel(image)
+    return edges.unit_p99(edges.magnitude(gx, gy) * _coherence(gx, gy))
 
 
-def _gxcoh(image, scan=None):
-    gx, gy = _gradients(image)
-    return _normalised(np.abs(gx) * _coherence(gx, gy))
+def _gxcoh(image, scan):
+    gx, gy = edges.sobel(image)
+    return edges.unit_p99(np.abs(gx) * _coherence(gx, gy))
 
 
-def _local(image, scan=None):
+def _local(image, scan):
     m = edges.gradient_magnitude(image)
-    return _normalised(m / (cv2.GaussianBlur(m, (0, 0), 8.0) + 0.1))
+    return edges.unit_p99(m / (cv2.GaussianBlur(m, (0, 0), 8.0) + 0.1))
 
 
-def _log(image, scan=None):
-    return _normalised(edges.magnitude(*_gradients(np.log1p(np.asarray(image, np.float32)))))
+def _log(image, scan):
+    return edges.unit_p99(edges.magnitude(*edges.sobel(np.log1p(np.asarray(image, np.float32)))))
 
 
-VARIANTS = {"base": lambda image, scan=None: edges.gradient_magnitude(image), "blur2": _blur2, "gx": ENGINE,
+VARIANTS = {"base": lambda image, scan: edges.gradient_magnitude(image), "blur2": _blur2, "gx": ENGINE,
             "rows": _anisotropic(0.0), "centre": _centre, "cos2": _cos2, "a05": _anisotropic(0.5),
             "a03": _anisotropic(0.3), "coh": _coh, "gxcoh": _gxcoh, "local": _local, "log": _log}
 

@@ -69,6 +69,7 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
     with_boards = board_evidence(rig) if boards and set(variants) - {"mi"} else None
     for variant in variants:
         settings = VARIANTS[variant]
+        judged = variant != "mi"  # every engine but the paper's MI has a verdict
         stack = stack_scenes(rig.scenes, rig.camera, rig.reference,
                              replace(settings, translation_bound=0.5, rotation_bound_deg=20.0))
         for deg, m in levels:
@@ -80,26 +81,26 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
                 aimed = stack.aimed_at(seed)  # edge maps read as the seed (not the reference) projects the scan lines
                 result = calibrate(aimed, None, seed, settings)
                 status, end = "-", result.extrinsic
-                if variant != "mi":
+                if judged:
                     v = judge(aimed, result, settings)
                     if with_boards is not None:
                         v = with_boards(v, seed)
                     status, end = v.status, v.extrinsic
                 seconds = time.perf_counter() - t0
                 se, ee = seed.error_to(rig.reference), end.error_to(rig.reference)
-                unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if variant != "mi" else []
-                spread = getattr(v, "spread", None) if variant != "mi" else None
+                unpinned = [a.axis for a in getattr(v, "translation", ()) if not a.pinned] if judged else []
+                spread = getattr(v, "spread", None) if judged else None
                 oe, move = result.extrinsic.error_to(rig.reference), seed.error_to(result.extrinsic)
                 rows.append(dict(rig=rig.name, variant=variant, unpinned="".join(unpinned), level=f"{deg:g}deg/{100 * m:g}cm", seed_deg=se[0], seed_m=se[1],
                                  end_deg=ee[0], end_m=ee[1], cls=classify(se, ee), status=status, seconds=seconds,
                                  opt_deg=oe[0], opt_m=oe[1], move_deg=move[0], move_m=move[1],
                                  spread_deg=None if spread is None else spread.deg,
                                  spread_m=None if spread is None or np.isnan(spread.m) else spread.m,
-                                 settled=getattr(v, "settled", "") if variant != "mi" else "",
+                                 settled=getattr(v, "settled", "") if judged else "",
                                  # for studying the verdict's rules offline: each check's outcome, each
                                  # axis's probe drop, and the optimiser's translation error per camera axis
-                                 checks={c.name: c.passed for c in v.checks} if variant != "mi" else {},
-                                 drops=[a.drop for a in v.translation] if variant != "mi" else [],
+                                 checks={c.name: c.passed for c in v.checks} if judged else {},
+                                 drops=[a.drop for a in v.translation] if judged else [],
                                  opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist()))
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
                       f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "

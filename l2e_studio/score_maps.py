@@ -85,10 +85,9 @@ def scan_directions(camera: CameraModel, extrinsic: Extrinsic, grid: int = SCAN_
 
 
 def rows(camera: CameraModel) -> np.ndarray:
-    """The scan-line field of a lidar whose rings run along the image rows (no seed to project)."""
-    field = np.zeros((camera.height, camera.width, 2), np.float32)
-    field[..., 0] = 1.0
-    return field
+    """The scan-line field of a lidar whose rings run along the image rows (no seed to project):
+    one direction, broadcast (read-only, no memory per pixel)."""
+    return np.broadcast_to(np.array([1.0, 0.0], np.float32), (camera.height, camera.width, 2))
 
 
 def _hat_weights(knots: np.ndarray, n: int) -> np.ndarray:

@@ -16,8 +16,8 @@ brightness edges in the image. This module holds both sides of that score:
   reference outscore it on two of the four single-scene rigs.
 * :func:`edge_map`: the image's gradient magnitude (or, opted into, its gradient across the
   lidar's scan lines: the only edges a scan that compares horizontal neighbours can match),
-  normalised by its 99th percentile (contrast does not matter, saturated sky has no gradient), smoothed at the stage's sigma and
-  **band-passed** (its local mean removed), so that a textured region (foliage, gravel) scores
+  normalised by its 99th percentile (contrast does not matter, saturated sky has no gradient),
+  smoothed at the stage's sigma and **band-passed** (its local mean removed), so that a textured region (foliage, gravel) scores
   about zero wherever points land on it and only edges that line up precisely count.
 
 The score is the weighted mean of the band-passed edge map under the projected edge points; a
@@ -116,13 +116,13 @@ def magnitude(gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     return np.sqrt(gx * gx + gy * gy)
 
 
-def _sobel(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """d/du and d/dv of the image after a 1 px blur."""
-    g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
+def sobel(image: np.ndarray, blur: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """d/du and d/dv of the image after a ``blur`` px Gaussian blur."""
+    g = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), blur)
     return cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1)
 
 
-def _unit_p99(m: np.ndarray) -> np.ndarray:
+def unit_p99(m: np.ndarray) -> np.ndarray:
     """``m`` scaled so its 99th percentile is 1, clipped there (contrast does not matter)."""
     p99 = float(np.percentile(m, 99))
     if p99 <= 0:
@@ -133,13 +133,13 @@ def _unit_p99(m: np.ndarray) -> np.ndarray:
 def gradient_magnitude(image: np.ndarray) -> np.ndarray:
     """Sobel gradient magnitude of a lightly blurred image, scaled so its 99th percentile is 1
     (every orientation: what the structure check's Canny edges see)."""
-    return _unit_p99(magnitude(*_sobel(image)))
+    return unit_p99(magnitude(*sobel(image)))
 
 
-def scan_gradient(image: np.ndarray, scan: np.ndarray | None = None) -> np.ndarray:
+def scan_gradient(image: np.ndarray, scan: np.ndarray) -> np.ndarray:
     """The image gradient along the lidar's scan lines, ``|grad . u|``, scaled so its 99th
     percentile is 1; ``scan`` is the (H, W, 2) unit direction ``u`` of the scan lines at every
-    pixel (:func:`l2e_studio.score_maps.scan_directions`), ``None`` for the image rows.
+    pixel (:func:`l2e_studio.score_maps.scan_directions`).
 
     The lidar side finds its edges between neighbours along a scan line only, so the image
     edges it can line up with are those that cut across the scan lines; an edge that runs along
@@ -147,9 +147,8 @@ def scan_gradient(image: np.ndarray, scan: np.ndarray | None = None) -> np.ndarr
     score toward wherever the rings happen to sit. Kept out, the sparse 16-beam rigs (rings a
     degree or more apart) peak near their reference instead of degrees off it.
     """
-    gx, gy = _sobel(image)
-    m = np.abs(gx) if scan is None else np.abs(gx * scan[..., 0] + gy * scan[..., 1])
-    return _unit_p99(m)
+    gx, gy = sobel(image)
+    return unit_p99(np.abs(gx * scan[..., 0] + gy * scan[..., 1]))
 
 
 def edge_map(
