@@ -101,7 +101,10 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
                                  # axis's probe drop, and the optimiser's translation error per camera axis
                                  checks={c.name: c.passed for c in v.checks} if judged else {},
                                  drops=[a.drop for a in v.translation] if judged else [],
-                                 opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist()))
+                                 opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist(),
+                                 # the poses themselves (rotation vector, then translation), for scoring offline
+                                 poses={k: [*x.rotvec.tolist(), *x.translation.tolist()]
+                                        for k, x in (("seed", seed), ("result", result.extrinsic), ("end", end))}))
                 print(f"{rig.name:6s} {variant} {rows[-1]['level']:11s} {se[0]:.2f}/{100 * se[1]:.1f} -> "
                       f"{ee[0]:.2f}/{100 * ee[1]:.1f} {rows[-1]['cls']:6s} {status:16s} {seconds:.1f}s "
                       f"(optimiser {oe[0]:.2f}/{100 * oe[1]:.1f})", flush=True)
