@@ -148,14 +148,26 @@ class Verdict:
         return ((["rotation"] if self.seed_rotation else [])
                 + (["translation"] if axes == "xyz" else [f"translation along {', '.join(axes)}"] if axes else []))
 
+    def pinned(self) -> str:
+        """What pins the translation along each axis the scenes pin and the verdict takes from the
+        data, in one line ("" when none): the probe's drop, or the halves climbing back."""
+        axes = [a for a in self.translation if a.pinned and a.axis not in self.seed_axes]  # (the seed's: not the data's)
+        if not self.trusted or not axes:
+            return ""
+        return "translation pinned along " + ", ".join(
+            f"{a.axis} (moving {100 * PROBE_M:.0f} cm costs {100 * a.drop:.0f} %" + (
+                "" if np.isnan(a.returned) else f"; the halves climb back to within {100 * a.returned:.1f} cm") + ")"
+            for a in axes)
+
     def advice(self) -> list[str]:
         """One line per translation axis the scenes do not pin: which, and what to record."""
         return [a.line() for a in self.translation if not a.pinned]
 
     def lines(self) -> list[str]:
-        """The summary, one indented line per reason, then what to record (for a terminal)."""
+        """The summary, one indented line per reason, what pins the translation, then what to record
+        (for a terminal)."""
         return ([f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
-                + [f"  > {a}" for a in self.advice()])
+                + ([f"  = {self.pinned()}"] if self.pinned() else []) + [f"  > {a}" for a in self.advice()])
 
     def to_dict(self) -> dict:
         return {

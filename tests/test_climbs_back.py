@@ -79,3 +79,23 @@ def test_kitti_odometry_hands_back_a_trusted_translation_to_centimetres() -> Non
     deg, m = verdict.extrinsic.error_to(rig.reference)
     assert deg < 0.1 and m < 0.03, (deg, m)
     assert verdict.to_dict()["translation_axes"]["z"]["climbed_back_within_m"] <= RETURN_M
+
+
+def test_a_trusted_verdict_says_what_pins_each_axis_in_the_terminal_and_the_app() -> None:
+    from l2e_studio.app.panels.results import verdict_text
+    from l2e_studio.geometry import Extrinsic
+    from l2e_studio.verdict import Verdict
+
+    axes = translation_axes(np.array([0.2, 0.22, 0.05]), "edges", 10, np.array([np.nan, np.nan, 0.002]))
+    ext = Extrinsic(np.zeros(3), np.zeros(3))
+    v = Verdict("trusted", ext, False, (), (), 0.0, axes, "")
+    line = v.pinned()
+    assert line.startswith("translation pinned along x (moving 5 cm costs 20 %), y (")
+    assert line.endswith("z (moving 5 cm costs 5 %; the halves climb back to within 0.2 cm)")
+    assert f"  = {line}" in v.lines() and f"= {line}" in verdict_text(v)
+    # trusted-rotation keeping the seed's z: z is the seed's, not the data's
+    rot = Verdict("trusted-rotation", ext, False, ("r",), (), 0.0, axes, "z")
+    assert "z (" not in rot.pinned() and rot.pinned().startswith("translation pinned along x")
+    # not trusted, or every axis the seed's: nothing to say
+    assert Verdict("not-trusted", ext, True, ("r",), (), 0.0, axes).pinned() == ""
+    assert Verdict("trusted-rotation", ext, False, ("r",), (), 0.0, axes, "xyz").pinned() == ""

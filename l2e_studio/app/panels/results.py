@@ -131,6 +131,7 @@ def verdict_text(verdict) -> str:
     """The verdict in words, with why (markdown)."""
     head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
     return (head + "".join(f"  \n· {r}" for r in verdict.reasons)
+            + (f"  \n= {verdict.pinned()}" if verdict.pinned() else "")
             + "".join(f"  \n→ {a}" for a in verdict.advice()))
 
 
