@@ -181,6 +181,7 @@ class Verdict:
             **({"seed_stands": True} if self.seed_stands else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
+            **({"translation_pinned": self.pinned()} if self.pinned() else {}),
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
                                           **({} if np.isnan(a.returned) else {"climbed_back_within_m": round(a.returned, 4)}),
                                           **({} if a.pinned else {"advice": a.line()})} for a in self.translation},

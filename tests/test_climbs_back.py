@@ -81,7 +81,7 @@ def test_kitti_odometry_hands_back_a_trusted_translation_to_centimetres() -> Non
     assert verdict.to_dict()["translation_axes"]["z"]["climbed_back_within_m"] <= RETURN_M
 
 
-def test_a_trusted_verdict_says_what_pins_each_axis_in_the_terminal_and_the_app() -> None:
+def test_a_trusted_verdict_says_what_pins_each_axis_in_the_terminal_the_app_the_file_and_the_report() -> None:
     from l2e_studio.app.panels.results import verdict_text
     from l2e_studio.geometry import Extrinsic
     from l2e_studio.verdict import Verdict
@@ -93,9 +93,13 @@ def test_a_trusted_verdict_says_what_pins_each_axis_in_the_terminal_and_the_app(
     assert line.startswith("translation pinned along x (moving 5 cm costs 20 %), y (")
     assert line.endswith("z (moving 5 cm costs 5 %; the halves climb back to within 0.2 cm)")
     assert f"  = {line}" in v.lines() and f"= {line}" in verdict_text(v)
+    from l2e_studio.qa.report import verdict_html
+
+    assert v.to_dict()["translation_pinned"] == line and f"<p>{line}</p>" in verdict_html(v.to_dict())
     # trusted-rotation keeping the seed's z: z is the seed's, not the data's
     rot = Verdict("trusted-rotation", ext, False, ("r",), (), 0.0, axes, "z")
     assert "z (" not in rot.pinned() and rot.pinned().startswith("translation pinned along x")
     # not trusted, or every axis the seed's: nothing to say
     assert Verdict("not-trusted", ext, True, ("r",), (), 0.0, axes).pinned() == ""
+    assert "translation_pinned" not in Verdict("not-trusted", ext, True, ("r",), (), 0.0, axes).to_dict()
     assert Verdict("trusted-rotation", ext, False, ("r",), (), 0.0, axes, "xyz").pinned() == ""

@@ -241,6 +241,8 @@ def verdict_html(v) -> str:
         out.append(_tbl(["check", "", "what was measured"],
                         [[name, "passed" if c.get("passed") else "FAILED", c.get("detail", "")]
                          for name, c in checks.items() if isinstance(c, dict)], cls="checks"))
+    if isinstance(v.get("translation_pinned"), str):
+        out.append(f"<p>{_e(v['translation_pinned'])}</p>")
     axes = v.get("translation_axes")
     advice = [a["advice"] for a in axes.values() if isinstance(a, dict) and a.get("advice")] if isinstance(axes, dict) else []
     if advice:
