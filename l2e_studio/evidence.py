@@ -269,8 +269,8 @@ def climbs_back(sides: list[SceneStack], res: Extrinsic, axis: int, distance: fl
     A flat axis leaves a start where it is; a rotation that makes up for the move keeps it there;
     halves that disagree end apart. Only an axis both halves climb back along is pinned by them."""
     worst = 0.0
+    local = local_settings(settings, sides[0].camera, 2 * distance)  # a box that reaches back past the result
     for half in sides:
-        local = local_settings(settings, half.camera, 2 * distance)  # a box that reaches back past the result
         for sign in (-1.0, 1.0):
             step = np.zeros(3)
             step[axis] = sign * distance

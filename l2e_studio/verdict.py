@@ -166,10 +166,12 @@ class Verdict:
     def lines(self) -> list[str]:
         """The summary, one indented line per reason, what pins the translation, then what to record
         (for a terminal)."""
+        pinned = self.pinned()
         return ([f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
-                + ([f"  = {self.pinned()}"] if self.pinned() else []) + [f"  > {a}" for a in self.advice()])
+                + ([f"  = {pinned}"] if pinned else []) + [f"  > {a}" for a in self.advice()])
 
     def to_dict(self) -> dict:
+        pinned = self.pinned()
         return {
             "status": self.status,
             "summary": self.summary(),
@@ -181,7 +183,7 @@ class Verdict:
             **({"seed_stands": True} if self.seed_stands else {}),
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
-            **({"translation_pinned": self.pinned()} if self.pinned() else {}),
+            **({"translation_pinned": pinned} if pinned else {}),
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
                                           **({} if np.isnan(a.returned) else {"climbed_back_within_m": round(a.returned, 4)}),
                                           **({} if a.pinned else {"advice": a.line()})} for a in self.translation},

@@ -130,8 +130,9 @@ VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "�
 def verdict_text(verdict) -> str:
     """The verdict in words, with why (markdown)."""
     head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
+    pinned = verdict.pinned()
     return (head + "".join(f"  \n· {r}" for r in verdict.reasons)
-            + (f"  \n= {verdict.pinned()}" if verdict.pinned() else "")
+            + (f"  \n= {pinned}" if pinned else "")
             + "".join(f"  \n→ {a}" for a in verdict.advice()))
 
 
