@@ -54,7 +54,7 @@ from .peaks import far_climbs, rival_check
 from .verdict_check import Check
 
 #: what callers take from here: the verdict and judging's own types with it
-__all__ = ["AXIS_ADVICE", "ON_UNTRUSTED", "SIGNIFICANT", "STATUSES", "AxisPinned", "Check", "JudgeProgress",
+__all__ = ["AXIS_ADVICE", "ON_UNTRUSTED", "ROTATION_ADVICE", "SIGNIFICANT", "STATUSES", "AxisPinned", "Check", "JudgeProgress",
            "JudgingCancelled", "Spread", "Verdict", "judge", "settle", "translation_axes", "translation_drops",
            "with_check"]
 
@@ -77,6 +77,32 @@ AXIS_ADVICE = {
     "x": "add scenes with near objects (a few metres) whose vertical edges stand in front of a far background",
     "y": "add scenes with near objects whose top or bottom edges are in view (a table, a car's roof at a few metres)",
     "z": "add scenes with near objects at the image's left and right edges",
+}
+#: Per family of checks that can fail a rotation (the re-fit's "(rotation only)" ones share their
+#: family's line): what it means, and what to record or do (the Seed and Target tabs are the
+#: app's). Read off the dev rigs whose rotation is not trusted (realdata.md): on the 16-beam street
+#: rig poses 2 deg apart score 98 % of each other (a single peak); on the DAVIS346 sets the score
+#: stands at the level of its own noise (a significant peak); where boards are in view they are
+#: the evidence that decides.
+SHARED_HALVES = ("the parts of the data disagree about the rotation: check the sensors' time sync and leave out "
+                 "scenes with moving objects or taken while the rig moved")
+SEVERAL_PEAKS = ("other poses near it score nearly alike, so these scenes cannot tell them apart: add scenes of "
+                 "other places (other structure, not the same view again), line the overlay up by hand (the Seed "
+                 "tab) and calibrate from there, or calibrate from a checkerboard (the Target tab)")
+ROTATION_ADVICE = {
+    "score": "no pose scored above the seed: line the overlay up by hand (the Seed tab) and calibrate from there",
+    "second score": ("a score of another kind prefers the seed: the climb may have followed shading or texture; "
+                     "check the overlay by eye before trusting either"),
+    "a significant peak": ("the score at the result hardly stands above its own noise: the scenes hold too little "
+                           "structure both sensors see; add scenes with near upright objects (poles, trunks, building "
+                           "corners) spread over the image"),
+    "halves": "too few points to split the data in two: add scenes",
+    "both halves prefer the result": SHARED_HALVES,
+    "halves agree (rotation)": SHARED_HALVES,
+    "a single peak": SEVERAL_PEAKS,
+    "second start (rotation)": SEVERAL_PEAKS,
+    "boards agree": ("the boards in view disagree with the result: calibrate from the boards (the Target tab, or "
+                     "calibrate --target)"),
 }
 
 
@@ -159,9 +185,22 @@ class Verdict:
                 "" if np.isnan(a.returned) else f"; the halves climb back to within {100 * a.returned:.1f} cm") + ")"
             for a in axes)
 
+    def rotation_advice(self) -> list[str]:
+        """Where the rotation is not trusted: one line per family of its failed checks, what it
+        means and what to record or do (:data:`ROTATION_ADVICE`); [] otherwise."""
+        if self.trusted:
+            return []
+        out: list[str] = []
+        for c in self.checks:
+            text = None if c.passed else ROTATION_ADVICE.get(c.name.removesuffix(" (rotation only)"))
+            if text is not None and f"rotation: {text}" not in out:
+                out.append(f"rotation: {text}")
+        return out
+
     def advice(self) -> list[str]:
-        """One line per translation axis the scenes do not pin: which, and what to record."""
-        return [a.line() for a in self.translation if not a.pinned]
+        """What to record or do: :meth:`rotation_advice`, then one line per translation axis the
+        scenes do not pin (which, and what to record)."""
+        return self.rotation_advice() + [a.line() for a in self.translation if not a.pinned]
 
     def lines(self) -> list[str]:
         """The summary, one indented line per reason, what pins the translation, then what to record
@@ -184,6 +223,7 @@ class Verdict:
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             **({"translation_pinned": pinned} if pinned else {}),
+            **({"rotation_advice": rotation} if (rotation := self.rotation_advice()) else {}),
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
                                           **({} if np.isnan(a.returned) else {"climbed_back_within_m": round(a.returned, 4)}),
                                           **({} if a.pinned else {"advice": a.line()})} for a in self.translation},

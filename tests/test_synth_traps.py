@@ -12,7 +12,7 @@ import pytest
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes
 from l2e_studio.scenes import load_scene_folder
 from l2e_studio.synth import SynthConfig, config_with, perturb, read_truth, write_dataset
-from l2e_studio.verdict import judge
+from l2e_studio.verdict import ROTATION_ADVICE, judge
 
 SMALL = SynthConfig(n_scenes=3, width=480, height=270, points_per_scan=12_000, seed=5, map_kind="image")
 
@@ -106,5 +106,7 @@ def test_a_bias_every_scene_shares_is_not_trusted(tmp_path: Path) -> None:
             peak = next(c for c in verdict.checks if c.name == "a significant peak")
             assert not peak.passed, peak.detail
             assert verdict.status == "not-trusted" and verdict.kept_seed, verdict.lines()
+            # and the user is told what that means and what to record
+            assert f"rotation: {ROTATION_ADVICE['a significant peak']}" in verdict.advice(), verdict.lines()
         assert verdict.extrinsic.error_to(truth)[0] <= seed_deg + 0.1, verdict.lines()
     assert pulled, "the shared clutter did not pull the optimiser away"

@@ -243,6 +243,9 @@ def verdict_html(v) -> str:
                          for name, c in checks.items() if isinstance(c, dict)], cls="checks"))
     if isinstance(v.get("translation_pinned"), str):
         out.append(f"<p>{_e(v['translation_pinned'])}</p>")
+    rotation = v.get("rotation_advice")
+    if isinstance(rotation, list) and rotation:
+        out.append("<h3>Rotation: what to record or do</h3><ul>" + "".join(f"<li>{_e(a)}</li>" for a in rotation) + "</ul>")
     axes = v.get("translation_axes")
     advice = [a["advice"] for a in axes.values() if isinstance(a, dict) and a.get("advice")] if isinstance(axes, dict) else []
     if advice:
