@@ -227,3 +227,42 @@ def test_a_seed_at_the_peak_is_confirmed_not_nudged(page, app):
     doc = yaml.safe_load(path.read_text())
     assert doc["verdict"]["within_spread"]["rotation_from_seed"] is True
     assert doc["verdict"]["spread"]["rotation_deg"] > 0
+
+
+def several_peaks_judge(stack, result, settings, cancel=None, on_progress=None):
+    """``not-trusted`` as :func:`l2e_studio.verdict.judge` returns it on HITSZ's 16-beam rig (its
+    checks' details as measured there): poses 2 deg apart score alike. (The small synthetic scenes
+    have one peak, so the real checks would trust the result.)"""
+    from l2e_studio.verdict import translation_axes
+
+    failed = (Check("second start (rotation)", False, "from a start mirrored through the result it ends 6.374 deg away (limit 0.60)"),
+              Check("a single peak", False, "the best of the other ends lies 2.1 deg away and scores 98 % of it "
+                                            "(limit 80 % beyond 0.6 deg)"))
+    axes = translation_axes(np.array([0.13, 0.41, 0.06]), "edges", 8, np.array([np.nan, np.nan, 0.032]))
+    return Verdict("not-trusted", result.seed, True, tuple(f"{c.name}: {c.detail}" for c in failed),
+                   (Check("score", True, "up"), *failed), 0.1, axes)
+
+
+def test_a_refused_rotation_says_what_to_do_on_the_result_tab_and_in_the_saved_file(page, app, monkeypatch):
+    import l2e_studio.app.runs as runs
+    from l2e_studio.verdict import ROTATION_ADVICE
+
+    monkeypatch.setattr(runs, "judge", several_peaks_judge)
+    open_tab(page, "Optimise")
+    page.get_by_role("button", name="Start").click()
+    page.get_by_text("Finished").first.wait_for(timeout=120_000)
+    wait_for(lambda: app.state.snapshot().verdict is not None, what="the verdict")
+    open_tab(page, "Result")
+    line = f"rotation: {ROTATION_ADVICE['a single peak']}"
+    page.get_by_text("Verdict: not trusted: the seed is kept").first.wait_for()
+    advice = page.get_by_text("→ rotation: other poses near it score nearly alike").first
+    advice.wait_for()
+    text = advice.locator("xpath=ancestor::div[1]").inner_text()
+    assert line in text, text
+    # the rotation's line comes once (two checks of one family) and before the translation's
+    assert text.count("→ rotation:") == 1 and text.index("→ rotation:") < text.index("→ z is not pinned")
+    close_webgl_notice(page, 0.2)
+    shot(page, "result_rotation_advice")
+    path, _ = app.save_result()
+    doc = yaml.safe_load(path.read_text())
+    assert doc["verdict"]["rotation_advice"] == [line]
