@@ -39,7 +39,11 @@ def test_serve_prints_the_url_binds_loopback_and_serves_the_page(tmp_path, which
         cmd += ["--scenes", str(write_small_scenes(tmp_path / "scenes", n_scenes=2))]
     elif not (REPO / "assets" / "sample").is_dir():
         pytest.skip("assets/sample is not in this checkout")
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # Ctrl-C as a user's terminal delivers it, however the suite was started (a background job of
+    # a non-interactive shell ignores SIGINT, its children inherit that, and Python then installs
+    # no KeyboardInterrupt handler)
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         lines = []
         deadline = time.monotonic() + 60
