@@ -34,7 +34,7 @@ from .scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from .scoring.mi import N_BINS, entropy, kernel_matrix, mi_from_joint_histogram, silverman_bandwidth, weighted_std
 from .scenes import Scene
 from .score_maps import CLIP, rows, scan_directions, stack_maps
-from .pool import CHUNK, run_chunks, run_tasks
+from .pool import CHUNK, WORKERS, run_chunks, run_tasks
 
 MIN_DEPTH = 0.05  # m; points closer to the camera plane than this are ignored
 #: The edge maps are prepared again when the lidar's axis turns further than this (deg) from the
@@ -170,15 +170,17 @@ class SceneStack:
         raw_maps = self.raw_maps[:index] + (raw,) + self.raw_maps[index + 1:]
         return replace(self, maps=maps, raw_maps=raw_maps)
 
-    def select(self, mask: np.ndarray) -> "SceneStack":
-        """Keep the points where ``mask`` is true (the maps are shared, not copied)."""
-        mask = np.asarray(mask, dtype=bool)
+    def select(self, keep: np.ndarray) -> "SceneStack":
+        """Keep the points where the boolean mask ``keep`` is true, or those at the increasing
+        indices ``keep`` (the maps are shared, not copied)."""
+        keep = np.asarray(keep)
+        keep = keep if keep.dtype == bool else keep.astype(np.intp)
         return replace(
             self,
-            points=np.ascontiguousarray(self.points[:, mask]),
-            l_bins=self.l_bins[mask],
-            scene_of=self.scene_of[mask],
-            weights=None if self.weights is None else self.weights[mask],
+            points=np.ascontiguousarray(self.points[:, keep]),
+            l_bins=self.l_bins[keep],
+            scene_of=self.scene_of[keep],
+            weights=None if self.weights is None else self.weights[keep],
         )
 
     def subset(self, scenes: Sequence[int] | np.ndarray) -> "SceneStack":
@@ -206,10 +208,7 @@ class SceneStack:
         """At most ``max_points`` points: every k-th in scan order, so the sample stays even."""
         if max_points is None or self.n_points <= max_points:
             return self
-        step = -(-self.n_points // max_points)
-        mask = np.zeros(self.n_points, dtype=bool)
-        mask[::step] = True
-        return self.select(mask)
+        return self.select(evenly(np.arange(self.n_points), max_points))
 
     @property
     def n_scenes(self) -> int:
@@ -238,34 +237,55 @@ class SceneStack:
     def joint_histograms(self, extrinsic: Extrinsic, per_scene: bool = True) -> np.ndarray:
         """(S, 256, 256) int32 joint (L, E) counts per scene, nearest-pixel lookup, in-image
         points; with ``per_scene=False`` the (1, 256, 256) counts of all scenes pooled."""
-        joints = self._scene_joints(extrinsic)
-        if not per_scene:
-            joints = joints.sum(axis=0, dtype=np.int32, keepdims=True)
+        joints = self._scene_joints(extrinsic) if per_scene else self._pooled_joint(extrinsic)[None]
         return joints.reshape(-1, N_BINS, N_BINS)
+
+    def _count_scene(self, s: int, R: np.ndarray, t: np.ndarray, e_bins: np.ndarray, starts: np.ndarray,
+                     hist: np.ndarray) -> None:
+        """Add scene ``s``'s (L, E) pairs at ``R, t`` to ``hist`` (65536 int32), chunk by chunk."""
+        a, b = int(starts[s]), int(starts[s + 1])
+        pix = np.empty(min(CHUNK, b - a), np.int32)
+        for c in range(a, b, CHUNK):
+            d = min(c + CHUNK, b)
+            index = compiled.pixel_index(self.points[:, c:d], R, t, self.camera, MIN_DEPTH, pix)
+            compiled.count_pairs(index, self.l_bins[c:d], e_bins[s], hist)
 
     def _scene_joints(
         self, extrinsic: Extrinsic, then: Callable[[int, np.ndarray], None] | None = None
     ) -> np.ndarray:
         """(S, 65536) int32 joint counts, one scene per task on the worker threads; ``then(s,
         counts)`` runs in the same task once scene ``s`` is counted (e.g. its MI)."""
-        R = extrinsic.R.astype(np.float32)
-        t = extrinsic.translation.astype(np.float32)
+        R, t = extrinsic.R.astype(np.float32), extrinsic.translation.astype(np.float32)
         e_bins = _e_bins(self.maps)
         starts = np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
         joints = np.zeros((self.n_scenes, N_BINS * N_BINS), np.int32)
 
         def scene(s: int) -> None:
-            a, b = int(starts[s]), int(starts[s + 1])
-            pix = np.empty(min(CHUNK, b - a), np.int32)
-            for c in range(a, b, CHUNK):
-                d = min(c + CHUNK, b)
-                index = compiled.pixel_index(self.points[:, c:d], R, t, self.camera, MIN_DEPTH, pix)
-                compiled.count_pairs(index, self.l_bins[c:d], e_bins[s], joints[s])
+            self._count_scene(s, R, t, e_bins, starts, joints[s])
             if then is not None:
                 then(s, joints[s])
 
         run_tasks(scene, range(self.n_scenes))
         return joints
+
+    def _pooled_joint(self, extrinsic: Extrinsic, pooled: np.ndarray | None = None) -> np.ndarray:
+        """(65536,) int32 joint counts of the scenes in ``pooled`` (a boolean mask; default all)
+        summed: one histogram per worker, not per scene (a third of the time on 40 scenes of 2.5k
+        points, where zeroing and summing 40 histograms cost more than counting). The counts are
+        integers, so the sum is the per-scene histograms' to the last bit."""
+        R, t = extrinsic.R.astype(np.float32), extrinsic.translation.astype(np.float32)
+        e_bins = _e_bins(self.maps)
+        starts = np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
+        chosen = np.arange(self.n_scenes) if pooled is None else np.flatnonzero(pooled)
+        groups = [g for g in np.array_split(chosen, min(WORKERS, max(chosen.size, 1))) if g.size]
+        joints = np.zeros((max(len(groups), 1), N_BINS * N_BINS), np.int32)
+
+        def group(k: int) -> None:
+            for s in groups[k]:
+                self._count_scene(int(s), R, t, e_bins, starts, joints[k])
+
+        run_tasks(group, range(len(groups)))
+        return joints.sum(axis=0, dtype=np.int32) if len(joints) > 1 else joints[0]
 
     def mi(
         self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
@@ -277,12 +297,15 @@ class SceneStack:
         is computed in the task that counts its points.
         """
         per = np.full(self.n_scenes, np.nan)
+        mask = np.ones(self.n_scenes, bool) if pooled is None else np.asarray(pooled, dtype=bool)
+        if not per_scene:
+            total = mi_from_joint_histogram(self._pooled_joint(extrinsic, mask).reshape(N_BINS, N_BINS))
+            return (total if mask.any() else float("nan")), per
 
         def scene_mi(s: int, counts: np.ndarray) -> None:
             per[s] = mi_from_joint_histogram(counts.reshape(N_BINS, N_BINS))
 
-        joints = self._scene_joints(extrinsic, scene_mi if per_scene else None)
-        mask = np.ones(self.n_scenes, bool) if pooled is None else np.asarray(pooled, dtype=bool)
+        joints = self._scene_joints(extrinsic, scene_mi)
         total = float("nan")
         if mask.any():
             pooled_counts = joints.sum(axis=0) if mask.all() else joints[mask].sum(axis=0)
@@ -326,9 +349,9 @@ class SceneStack:
         """The differentiable score as a function of a correction of ``base``, over the points
         that land in the image at ``start`` (default: ``base``), thinned to ``max_points``."""
         start = base if start is None else start
-        inside = self.pixels(start) >= 0
+        inside = np.flatnonzero(self.pixels(start) >= 0)
         cls = EdgeObjective if self.objective_name == "edges" else MIObjective
-        return cls(self.select(inside).thinned(max_points), base, start)
+        return cls(self.select(evenly(inside, max_points)), base, start)  # one copy, not two
 
 
 class MapObjective:
@@ -517,6 +540,13 @@ E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 _E_BINS: list[tuple[weakref.ref, np.ndarray]] = []
 _E_BINS_KEEP = 3
 _E_BINS_LOCK = threading.Lock()
+
+
+def evenly(indices: np.ndarray, max_points: int | None) -> np.ndarray:
+    """At most ``max_points`` of ``indices``: every k-th, so a sample in scan order stays even."""
+    if max_points is None or indices.size <= max_points:
+        return indices
+    return indices[:: -(-indices.size // max_points)]
 
 
 def _e_bins(maps: np.ndarray) -> np.ndarray:

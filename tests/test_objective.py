@@ -165,3 +165,33 @@ def test_with_map_on_a_coarse_stack_keeps_its_scale(small_synth):
     swapped = coarse.with_map(2, scenes[0].event_map)
     assert swapped.maps.shape == coarse.maps.shape and swapped.scale == 0.5
     np.testing.assert_allclose(swapped.maps[2], coarse.maps[0], atol=1e-5)
+
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_pooled_counts_are_the_per_scene_counts_summed_exactly(small_synth, workers, monkeypatch):
+    """The pooled path counts into one histogram per worker, not per scene: the same integers."""
+    import l2e_studio.objective as objective
+    monkeypatch.setattr(objective, "WORKERS", workers)
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    per = stack.joint_histograms(truth)
+    pooled = stack.joint_histograms(truth, per_scene=False)
+    assert pooled.shape == (1, 256, 256) and per.sum() > 1000
+    assert np.array_equal(pooled[0], per.sum(axis=0))
+    for mask in (np.arange(len(scenes)) % 2 == 1, np.eye(len(scenes), dtype=bool)[0]):
+        assert stack.mi(truth, per_scene=False, pooled=mask)[0] == stack.mi(truth, pooled=mask)[0]
+    assert np.isnan(stack.mi(truth, per_scene=False, pooled=np.zeros(len(scenes), bool))[0])
+
+
+def test_the_objective_keeps_every_kth_point_of_those_in_the_image(small_synth):
+    """One copy of the stack per stage: the in-image points, then every k-th of them in scan order."""
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    start = truth.perturbed([0.05, 0.0, 0.0], np.radians([0.0, 3.0, 0.0]))
+    inside = stack.pixels(start) >= 0
+    budget = int(inside.sum()) // 3 + 7
+    kept = stack.objective(truth, start, max_points=budget).stack
+    expected = stack.select(inside).thinned(budget)
+    assert kept.n_points <= budget and kept.n_points > budget // 2
+    assert np.array_equal(kept.points, expected.points) and np.array_equal(kept.scene_of, expected.scene_of)
+    assert np.array_equal(stack.select(np.flatnonzero(inside)).points, stack.select(inside).points)
