@@ -51,12 +51,14 @@ from .evidence import (RETURN_M, JudgeProgress, JudgingCancelled, Spread, Steps,
 from .geometry import Extrinsic
 from .objective import SceneStack
 from .peaks import far_climbs, rival_check
+from .scoring.edges import scan_line_spacing_deg
 from .verdict_check import Check
 
 #: what callers take from here: the verdict and judging's own types with it
-__all__ = ["AXIS_ADVICE", "ON_UNTRUSTED", "ROTATION_ADVICE", "SIGNIFICANT", "STATUSES", "AxisPinned", "Check", "JudgeProgress",
-           "JudgingCancelled", "Spread", "Verdict", "judge", "settle", "translation_axes", "translation_drops",
-           "with_check"]
+__all__ = ["AXIS_ADVICE", "ON_UNTRUSTED", "ROTATION_ADVICE", "SEVERAL_PEAKS", "SHARED_HALVES", "SIGNIFICANT",
+           "SPARSE_SCAN_DEG", "STATUSES", "AxisPinned", "Check", "JudgeProgress", "JudgingCancelled", "Spread",
+           "Verdict", "judge", "scan_line_spacing", "settle", "sparse_scan_line", "translation_axes",
+           "translation_drops", "with_check"]
 
 STATUSES = ("trusted", "trusted-rotation", "not-trusted")
 ON_UNTRUSTED = ("keep-seed", "mark")
@@ -104,6 +106,19 @@ ROTATION_ADVICE = {
     "boards agree": ("the boards in view disagree with the result: calibrate from the boards (the Target tab, or "
                      "calibrate --target)"),
 }
+#: A lidar whose scan lines sit this far apart (deg) or more is sparse for a targetless rotation:
+#: a VLP-16 (2 deg) on every 16-beam dev rig, where no rotation was trusted from a seed 1 deg or
+#: more off; not the 64- and 128-beam dev rigs (0.35-0.4 deg) nor an HDL-32E (1.33 deg), which
+#: calibrates on the synthetic rigs.
+SPARSE_SCAN_DEG = 1.5
+
+
+def sparse_scan_line(deg: float, px: float) -> str:
+    """The rotation's advice for a lidar whose scan lines are ``deg`` apart (``px`` at the image's centre)."""
+    return (f"rotation: the lidar's scan lines are {deg:.1f} deg apart ({px:.0f} px at the image's centre); "
+            "an edge that runs along them is placed no finer than that, so the score rests on the few edges that "
+            "cross them. A checkerboard held at several places and tilts pins the rotation from a scan this sparse "
+            "(the Target tab, or calibrate --target)")
 
 
 @dataclass(frozen=True)
@@ -127,6 +142,9 @@ class Verdict:
     seed_rotation: bool = False
     settled_axes: str = ""
     settled: str = ""  # that, in one sentence ("" when nothing)
+    #: how far apart the lidar's scan lines are, in deg and in px at the image's centre (measured
+    #: only where the rotation is not trusted; nan otherwise): :func:`scan_line_spacing`
+    scan_lines: tuple[float, float] = (float("nan"), float("nan"))
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -195,6 +213,8 @@ class Verdict:
             text = None if c.passed else ROTATION_ADVICE.get(c.name.removesuffix(" (rotation only)"))
             if text is not None and f"rotation: {text}" not in out:
                 out.append(f"rotation: {text}")
+        if self.scan_lines[0] >= SPARSE_SCAN_DEG:
+            out.append(sparse_scan_line(*self.scan_lines))
         return out
 
     def advice(self) -> list[str]:
@@ -224,6 +244,8 @@ class Verdict:
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             **({"translation_pinned": pinned} if pinned else {}),
             **({"rotation_advice": rotation} if (rotation := self.rotation_advice()) else {}),
+            **({"scan_line_spacing": {"deg": round(self.scan_lines[0], 3), "px_at_centre": round(self.scan_lines[1], 1)}}
+               if np.isfinite(self.scan_lines[0]) else {}),
             "translation_axes": {a.axis: {"pinned": a.pinned, "score_drop": round(a.drop, 4),
                                           **({} if np.isnan(a.returned) else {"climbed_back_within_m": round(a.returned, 4)}),
                                           **({} if a.pinned else {"advice": a.line()})} for a in self.translation},
@@ -437,7 +459,17 @@ def judge(
     steps.check()
     keep = on_untrusted == "keep-seed"
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes,
-                   spread=spread)
+                   spread=spread, scan_lines=scan_line_spacing(final, res))
+
+
+def scan_line_spacing(stack: SceneStack, at: Extrinsic) -> tuple[float, float]:
+    """How far apart the lidar's scan lines are among the first scene's points in the image at
+    ``at``: (deg, px at the image's centre along its rows). One scene is enough (a rig's scan
+    pattern does not change between scenes) and keeps this to a few hundredths of a second."""
+    first = stack.subset([0])
+    deg = scan_line_spacing_deg(first.points[:, first.project(at)[1]].T)
+    camera = stack.full_camera or stack.camera
+    return deg, float(np.radians(deg) * camera.K[1, 1])
 
 
 def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: str = "keep-seed") -> Verdict:

@@ -81,6 +81,60 @@ def test_a_pulled_result_on_a_real_16_beam_rig_says_what_failed_and_what_to_do()
     advice = v.rotation_advice()
     assert advice, v.lines()
     failed = {c.name.removesuffix(" (rotation only)") for c in v.checks if not c.passed}
-    for line in advice:
+    for line in advice[:-1]:
         assert any(line == f"rotation: {ROTATION_ADVICE[f]}" for f in failed if f in ROTATION_ADVICE), (line, failed)
     assert v.to_dict()["rotation_advice"] == advice
+    # the family lines, then the lidar's own: a VLP-16's scan lines are 2 deg apart
+    from l2e_studio.verdict import sparse_scan_line
+    assert v.scan_lines[0] == pytest.approx(2.0, abs=0.05) and advice[-1] == sparse_scan_line(*v.scan_lines)
+    assert v.to_dict()["scan_line_spacing"]["deg"] == pytest.approx(2.0, abs=0.05)
+
+
+@pytest.mark.parametrize("name, spacing", [("vlp16", 2.0), ("hdl32", 41.34 / 31), ("hdl64", 26.9 / 63), ("os128", 45.0 / 127)])
+def test_the_scan_lines_spacing_is_read_off_the_points_of_any_spinning_lidar(name, spacing) -> None:
+    """The points a camera 90 deg wide sees, at ranges that vary point to point, in any scan order."""
+    from l2e_studio.scoring.edges import scan_line_spacing_deg
+    from l2e_studio.synth.lidars import LIDARS, ring_directions
+
+    rng = np.random.default_rng(5)
+    dirs, _ = ring_directions(LIDARS[name]["elevations_deg"], LIDARS[name]["azimuth_step_deg"], rng, hfov_deg=90.0)
+    points = dirs * rng.uniform(3.0, 40.0, (len(dirs), 1))
+    assert scan_line_spacing_deg(points[rng.permutation(len(points))]) == pytest.approx(spacing, rel=0.03)
+    # looking backwards (azimuths about +-180 deg, where they wrap) reads the same
+    assert scan_line_spacing_deg(points * [-1.0, -1.0, 1.0]) == pytest.approx(spacing, rel=0.03)
+    assert np.isnan(scan_line_spacing_deg(points[:3]))
+
+
+def test_a_sparse_lidar_adds_its_own_line_to_a_refused_rotation_and_only_then() -> None:
+    from l2e_studio.verdict import SPARSE_SCAN_DEG, sparse_scan_line
+
+    refused = _verdict("not-trusted", ["a single peak"])
+    sparse = Verdict(**{**refused.__dict__, "scan_lines": (2.0, 82.8)})
+    assert sparse.rotation_advice() == refused.rotation_advice() + [sparse_scan_line(2.0, 82.8)]
+    assert "2.0 deg apart (83 px" in sparse.rotation_advice()[-1] and "Target tab" in sparse.rotation_advice()[-1]
+    assert sparse.to_dict()["scan_line_spacing"] == {"deg": 2.0, "px_at_centre": 82.8}
+    assert f"  > {sparse_scan_line(2.0, 82.8)}" in sparse.lines()
+    dense = Verdict(**{**refused.__dict__, "scan_lines": (0.36, 4.5)})
+    assert dense.rotation_advice() == refused.rotation_advice() and "scan_line_spacing" in dense.to_dict()
+    assert Verdict(**{**refused.__dict__, "scan_lines": (SPARSE_SCAN_DEG, 60.0)}).rotation_advice()[-1].startswith(
+        "rotation: the lidar's scan lines")
+    trusted = Verdict(**{**_verdict("trusted", []).__dict__, "scan_lines": (2.0, 82.8)})
+    assert trusted.rotation_advice() == []
+    assert "scan_line_spacing" not in refused.to_dict()  # not measured
+
+
+def test_the_real_rigs_scan_lines_as_the_verdict_measures_them() -> None:
+    """VLP-16 rigs 2 deg apart (sparse), the 64-beam KITTI drive 0.36 deg (not), at the reference."""
+    from l2e_studio.verdict import SPARSE_SCAN_DEG, scan_line_spacing
+
+    rigs = {r.name: r for r in load_rigs(["hitsz_vlp16", "lcecalib_rles01_frame", "kitti_odometry_00"])}
+    if len(rigs) < 3:
+        pytest.skip("realdata hitsz_vlp16, lcecalib_rles01_frame or kitti_odometry_00 not present")
+    settings = CalibrationSettings()
+    got = {}
+    for name, rig in rigs.items():
+        stack = stack_scenes(rig.scenes, rig.camera, rig.reference, settings)
+        got[name] = scan_line_spacing(stack, rig.reference)
+    assert got["hitsz_vlp16"][0] == pytest.approx(2.0, abs=0.05) and got["hitsz_vlp16"][1] == pytest.approx(83, abs=3)
+    assert got["lcecalib_rles01_frame"][0] == pytest.approx(2.0, abs=0.05) and got["lcecalib_rles01_frame"][1] < 15
+    assert 0.3 < got["kitti_odometry_00"][0] < 0.45 < SPARSE_SCAN_DEG
