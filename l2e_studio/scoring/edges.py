@@ -120,7 +120,7 @@ def scan_line_spacing_deg(points: np.ndarray) -> float:
     to the nearest point of the line above or below (lidar frame, z up); nan without such pairs.
 
     The edge score finds its lidar edges along the scan lines only, so an edge that runs along
-    them is placed no finer than this (2.0 on a VLP-16, 0.35-0.4 on the 64- and 128-beam dev rigs).
+    them is placed no finer than this (2.0 on a VLP-16, 0.34-0.36 on the OpenCalib and KITTI dev rigs).
     Pass the points in the camera's view: there the lines' spacing is what the image sees, and a
     lens 90 deg wide keeps the azimuths off their wrap-around (they are centred on their mean)."""
     P = np.asarray(points, dtype=np.float64)
