@@ -124,7 +124,7 @@ def test_pooled_mask_and_subset_agree_with_a_stack_of_those_scenes(small_synth):
 def test_with_map_replaces_one_scene_and_leaves_the_others_and_the_old_stack(small_synth, objective, monkeypatch):
     import dataclasses
 
-    import l2e_studio.objective as engine
+    import l2e_studio.objective.stack as engine
 
     scenes, camera, truth = small_synth
     stack = SceneStack.build(scenes, camera, sigma=3.0, objective=objective)
@@ -170,7 +170,7 @@ def test_with_map_on_a_coarse_stack_keeps_its_scale(small_synth):
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_pooled_counts_are_the_per_scene_counts_summed_exactly(small_synth, workers, monkeypatch):
     """The pooled path counts into one histogram per worker, not per scene: the same integers."""
-    import l2e_studio.objective as objective
+    import l2e_studio.objective.stack as objective
     monkeypatch.setattr(objective, "WORKERS", workers)
     scenes, camera, truth = small_synth
     stack = SceneStack.build(scenes, camera, sigma=2.0)
