@@ -231,7 +231,7 @@ def test_a_seed_at_the_peak_is_confirmed_not_nudged(page, app):
 
 def several_peaks_judge(stack, result, settings, cancel=None, on_progress=None):
     """``not-trusted`` as :func:`l2e_studio.verdict.judge` returns it on HITSZ's 16-beam rig (its
-    checks' details as measured there): poses 2 deg apart score alike. (The small synthetic scenes
+    checks' details and its scan lines' spacing as measured there): poses 2 deg apart score alike. (The small synthetic scenes
     have one peak, so the real checks would trust the result.)"""
     from l2e_studio.verdict import translation_axes
 
@@ -240,12 +240,12 @@ def several_peaks_judge(stack, result, settings, cancel=None, on_progress=None):
                                             "(limit 80 % beyond 0.6 deg)"))
     axes = translation_axes(np.array([0.13, 0.41, 0.06]), "edges", 8, np.array([np.nan, np.nan, 0.032]))
     return Verdict("not-trusted", result.seed, True, tuple(f"{c.name}: {c.detail}" for c in failed),
-                   (Check("score", True, "up"), *failed), 0.1, axes)
+                   (Check("score", True, "up"), *failed), 0.1, axes, scan_lines=(2.0, 82.8))  # a VLP-16's, there
 
 
 def test_a_refused_rotation_says_what_to_do_on_the_result_tab_and_in_the_saved_file(page, app, monkeypatch):
     import l2e_studio.app.runs as runs
-    from l2e_studio.verdict import ROTATION_ADVICE
+    from l2e_studio.verdict import ROTATION_ADVICE, sparse_scan_line
 
     monkeypatch.setattr(runs, "judge", several_peaks_judge)
     open_tab(page, "Optimise")
@@ -259,10 +259,12 @@ def test_a_refused_rotation_says_what_to_do_on_the_result_tab_and_in_the_saved_f
     advice.wait_for()
     text = advice.locator("xpath=ancestor::div[1]").inner_text()
     assert line in text, text
-    # the rotation's line comes once (two checks of one family) and before the translation's
-    assert text.count("→ rotation:") == 1 and text.index("→ rotation:") < text.index("→ z is not pinned")
+    # the family's line comes once (two checks of one family), then the sparse lidar's, then the translation's
+    sparse = sparse_scan_line(2.0, 82.8)
+    assert text.count("→ rotation:") == 2 and text.index(line) < text.index(sparse) < text.index("→ z is not pinned")
     close_webgl_notice(page, 0.2)
     shot(page, "result_rotation_advice")
     path, _ = app.save_result()
     doc = yaml.safe_load(path.read_text())
-    assert doc["verdict"]["rotation_advice"] == [line]
+    assert doc["verdict"]["rotation_advice"] == [line, sparse]
+    assert doc["verdict"]["scan_line_spacing"] == {"deg": 2.0, "px_at_centre": 82.8}
