@@ -18,7 +18,7 @@ from l2e_studio.verdict import AXIS_ADVICE, OBSERVABLE_DROP, PROBE_M, judge, tra
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from realdata_rigs import load_rigs, perturbations  # noqa: E402
-from test_structure_objective import _box_world  # noqa: E402
+from box_world import box_world  # noqa: E402
 
 
 def test_an_axis_short_of_the_drop_is_pinned_only_where_both_halves_climbed_back() -> None:
@@ -37,7 +37,7 @@ def _scenes(scale: float) -> tuple[list[Scene], object, object]:
     the truth from the scaled points: far boxes look the same, but pin no translation)."""
     scenes = []
     for i in range(4):
-        scene, cam, truth = _box_world(np.random.default_rng(10 + i))
+        scene, cam, truth = box_world(np.random.default_rng(10 + i))
         scenes.append(Scene(f"s{i}", scene.points * np.float32(scale), scene.intensity, scene.event_map, "image"))
     return scenes, cam, truth
 

@@ -21,43 +21,11 @@ from l2e_studio.verdict import judge
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from realdata_rigs import load_rigs, perturbations  # noqa: E402
-
-
-def _box_world(rng: np.random.Generator) -> tuple[Scene, CameraModel, Extrinsic]:
-    """Boxes in front of a wall, seen by a camera whose image is a rendering of the boxes' edges."""
-    cam = CameraModel(np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]]), 640, 480)
-    truth = Extrinsic.from_matrix(np.array([[0, -1, 0, 0.05], [0, 0, -1, -0.1], [1, 0, 0, 0.02], [0, 0, 0, 1.0]]))
-    pts, inten = [], []
-    az = np.radians(np.arange(-40, 40, 0.15))
-    for el in np.radians(np.arange(-25, 25, 0.8)):
-        for a in az:
-            d = np.array([np.cos(el) * np.cos(a), np.cos(el) * np.sin(a), np.sin(el)])
-            r = 12.0
-            for cx, cy, half, depth in ((0.0, 2.0, 1.0, 6.0), (0.0, -2.5, 0.8, 8.0), (0.0, 0.5, 0.5, 4.0)):
-                # a box face at x = depth spanning y in cy +- half, z in +-half
-                t = depth / max(d[0], 1e-6)
-                y, z = t * d[1], t * d[2]
-                if abs(y - cy) < half and abs(z) < half and t < r:
-                    r = t
-            pts.append(r * d)
-            inten.append(200.0 if r < 12 else 40.0)
-    P = np.array(pts, dtype=np.float32)
-    inten = np.array(inten, dtype=np.float32) + rng.normal(0, 3, len(P)).astype(np.float32)
-    # the image: mid-grey wall, bright boxes, textured noise; plus a saturated "sky" band
-    uv = cam.K @ truth.transform(P).T
-    uv = (uv[:2] / uv[2]).T
-    img = np.full((480, 640), 90.0, np.float32)
-    near = inten > 120
-    for (u, v) in uv[near].astype(int):
-        if 0 <= u < 640 and 0 <= v < 480:
-            cv2.circle(img, (u, v), 3, 170.0, -1)
-    img += rng.normal(0, 4, img.shape).astype(np.float32)
-    img[:40] = 255.0
-    return Scene("boxes", P, np.clip(inten, 0, 255), np.clip(img, 0, 255), "image"), cam, truth
+from box_world import box_world  # noqa: E402
 
 
 def test_edge_objective_gradient_matches_finite_differences() -> None:
-    scene, cam, truth = _box_world(np.random.default_rng(0))
+    scene, cam, truth = box_world(np.random.default_rng(0))
     stack = SceneStack.build([scene], cam, 3.0, objective="edges")
     obj = stack.objective(truth)
     assert isinstance(obj, EdgeObjective)
@@ -71,7 +39,7 @@ def test_edge_objective_gradient_matches_finite_differences() -> None:
 
 
 def test_edges_objective_moves_towards_the_truth_and_the_verdict_never_hands_back_worse() -> None:
-    scene, cam, truth = _box_world(np.random.default_rng(1))
+    scene, cam, truth = box_world(np.random.default_rng(1))
     seed = truth.perturbed(np.array([0.03, -0.02, 0.0]), np.radians([1.0, -1.0, 0.5]))
     settings = CalibrationSettings()
     stack = stack_scenes([scene], cam, seed, settings)
@@ -243,7 +211,7 @@ def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
     of pure noise no pose does."""
     from l2e_studio.peaks import noise_ceiling, significance_check
 
-    scene, cam, truth = _box_world(np.random.default_rng(1))
+    scene, cam, truth = box_world(np.random.default_rng(1))
     settings = CalibrationSettings()
     stack = stack_scenes([scene], cam, truth, settings).with_sigma(settings.sigma)
     real = significance_check(stack, truth, settings)
@@ -286,7 +254,7 @@ def test_one_scene_is_split_into_strips_and_never_hands_back_its_own_translation
     shared), and whatever its checks say, its translation is the seed's: one scene pins no axis."""
     from l2e_studio.evidence import HALF_STRIPS, halves
 
-    scene, cam, truth = _box_world(np.random.default_rng(3))
+    scene, cam, truth = box_world(np.random.default_rng(3))
     settings = CalibrationSettings()
     seed = truth.perturbed(np.array([0.03, -0.02, 0.02]), np.radians([1.0, -1.0, 0.5]))
     stack = stack_scenes([scene], cam, seed, settings)
