@@ -116,9 +116,9 @@ SPARSE_SCAN_DEG = 1.5
 def sparse_scan_line(deg: float, px: float) -> str:
     """The rotation's advice for a lidar whose scan lines are ``deg`` apart (``px`` at the image's centre)."""
     return (f"rotation: the lidar's scan lines are {deg:.1f} deg apart ({px:.0f} px at the image's centre); "
-            "an edge that runs along them is placed no finer than that, so the score rests on the few edges that "
-            "cross them. A checkerboard held at several places and tilts pins the rotation from a scan this sparse "
-            "(the Target tab, or calibrate --target)")
+            "structure that runs along them is placed no finer than that, so the score rests on the little that "
+            "crosses them. A checkerboard held at several places and tilts pins the rotation from a scan this "
+            "sparse (the Target tab, or calibrate --target)")
 
 
 @dataclass(frozen=True)
@@ -464,7 +464,7 @@ def judge(
 
 def scan_line_spacing(stack: SceneStack, at: Extrinsic) -> tuple[float, float]:
     """How far apart the lidar's scan lines are among the first scene's points in the image at
-    ``at``: (deg, px at the image's centre along its rows). One scene is enough (a rig's scan
+    ``at``: (deg, and px from line to line at the image's centre). One scene is enough (a rig's scan
     pattern does not change between scenes) and keeps this to a few hundredths of a second."""
     first = stack.subset([0])
     deg = scan_line_spacing_deg(first.points[:, first.project(at)[1]].T)

@@ -125,7 +125,8 @@ def scan_line_spacing_deg(points: np.ndarray) -> float:
     lens 90 deg wide keeps the azimuths off their wrap-around (they are centred on their mean)."""
     P = np.asarray(points, dtype=np.float64)
     r = np.linalg.norm(P, axis=1)
-    P, r = P[np.isfinite(r) & (r > 1e-6)], r[np.isfinite(r) & (r > 1e-6)]
+    ok = np.isfinite(r) & (r > 1e-6)
+    P, r = P[ok], r[ok]
     if len(P) < 4:
         return float("nan")
     az = np.arctan2(P[:, 1], P[:, 0])
