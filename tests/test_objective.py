@@ -195,3 +195,27 @@ def test_the_objective_keeps_every_kth_point_of_those_in_the_image(small_synth):
     assert kept.n_points <= budget and kept.n_points > budget // 2
     assert np.array_equal(kept.points, expected.points) and np.array_equal(kept.scene_of, expected.scene_of)
     assert np.array_equal(stack.select(np.flatnonzero(inside)).points, stack.select(inside).points)
+
+
+def test_a_stack_prepares_each_smoothing_once_and_keeps_a_few(small_synth, monkeypatch):
+    """Every climb of a search and the verdict's probes ask one stack for the same stages: their
+    maps are prepared once, the same as a fresh preparation, and only for that stack's points."""
+    import l2e_studio.objective.stack as stack_module
+
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0)
+    prepared = []
+    real = stack_module.stack_maps
+    monkeypatch.setattr(stack_module, "stack_maps", lambda raw, *a, **k: prepared.append(a[1]) or real(raw, *a, **k))
+    coarse = stack.with_sigma(8.0, 0.5)
+    assert stack.with_sigma(8.0, 0.5) is coarse and stack.with_sigma(2.0) is stack and prepared == [8.0]
+    fresh = SceneStack.build(scenes, camera, sigma=2.0).with_sigma(8.0, 0.5)
+    np.testing.assert_array_equal(coarse.maps, fresh.maps)
+    # a stack of other points (a half, a subset) prepares its own, and starts with none kept
+    half = stack.select(stack.scene_of % 2 == 0)
+    assert half.with_sigma(8.0, 0.5) is not coarse and half.with_sigma(8.0, 0.5).n_points == half.n_points
+    # at most SMOOTHED_KEEP are kept, the oldest going first
+    for s in (3.0, 4.0, 5.0, 6.0):
+        stack.with_sigma(s)
+    assert len(stack._smoothed) == stack_module.SMOOTHED_KEEP and (8.0, 0.5) not in stack._smoothed
+    assert stack.with_sigma(6.0) is stack.with_sigma(6.0)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 import weakref
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -29,6 +29,10 @@ from ..scoring.edges import MIN_WEIGHT, lidar_edge_weights
 from ..scoring.mi import N_BINS, mi_from_joint_histogram
 from .smooth import MIN_DEPTH, EdgeObjective, MapObjective, MIObjective
 
+#: How many smoothings of one stack :meth:`SceneStack.with_sigma` keeps (the schedule's three stages
+#: and the verdict's raw maps).
+SMOOTHED_KEEP = 4
+_SMOOTHED_LOCK = threading.Lock()
 #: The edge maps are prepared again when the lidar's axis turns further than this (deg) from the
 #: extrinsic they were prepared for: the gradient then leaks at most sin(3 deg), 5 %, along the lines.
 SCAN_REAIM_DEG = 3.0
@@ -54,6 +58,10 @@ class SceneStack:
     gradient: str = "magnitude"  # what the edge maps read (``scoring.EDGE_GRADIENTS``)
     scan: np.ndarray | None = None  # (H, W, 2) float32 scan-line directions at full resolution (``scan-lines``)
     scan_axis: np.ndarray | None = None  # the lidar's z axis in the camera frame that ``scan`` was projected for
+    #: the stacks :meth:`with_sigma` derived from this one, by (sigma, scale), the latest
+    #: ``SMOOTHED_KEEP``: every climb of a global search, and the verdict's probes after it, climb
+    #: the same stages, whose maps are then prepared once (not copied to stacks derived otherwise)
+    _smoothed: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -126,10 +134,20 @@ class SceneStack:
         optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages."""
         if sigma == self.sigma and scale == self.scale:
             return self
+        key = (float(sigma), float(scale))
+        with _SMOOTHED_LOCK:
+            hit = self._smoothed.get(key)
+        if hit is not None:
+            return hit
         full = self.full_camera or self.camera
         camera = full if scale == 1.0 else full.scaled(scale)
         maps = stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name, self.scan)
-        return replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
+        out = replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
+        with _SMOOTHED_LOCK:  # (two threads asking at once both prepare; either result is the same)
+            while len(self._smoothed) >= SMOOTHED_KEEP:  # bounded: the oldest goes (a slider may ask for many)
+                self._smoothed.pop(next(iter(self._smoothed)))
+            self._smoothed[key] = out
+        return out
 
     def aimed_at(self, extrinsic: Extrinsic) -> "SceneStack":
         """The stack whose edge maps read across the scan lines as ``extrinsic`` projects them:
