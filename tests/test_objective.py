@@ -219,3 +219,7 @@ def test_a_stack_prepares_each_smoothing_once_and_keeps_a_few(small_synth, monke
         stack.with_sigma(s)
     assert len(stack._smoothed) == stack_module.SMOOTHED_KEEP and (8.0, 0.5) not in stack._smoothed
     assert stack.with_sigma(6.0) is stack.with_sigma(6.0)
+    # a subset of every scene shares the arrays but keeps its own smoothings (a run's live as long as the run)
+    whole = stack.subset(np.ones(len(scenes), bool))
+    assert whole is not stack and whole.maps is stack.maps and whole.points is stack.points
+    assert whole.with_sigma(6.0) is not stack.with_sigma(6.0) and whole._smoothed.keys() == {(6.0, 1.0)}

@@ -131,7 +131,8 @@ class SceneStack:
 
     def with_sigma(self, sigma: float, scale: float = 1.0) -> "SceneStack":
         """The same points over maps smoothed with another sigma (full-resolution pixels),
-        optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages."""
+        optionally at a reduced resolution (``scale`` < 1) for cheap coarse stages. Asked again,
+        the same stack (the latest ``SMOOTHED_KEEP`` are kept)."""
         if sigma == self.sigma and scale == self.scale:
             return self
         key = (float(sigma), float(scale))
@@ -198,7 +199,9 @@ class SceneStack:
         idx = np.asarray(scenes)
         idx = np.flatnonzero(idx) if idx.dtype == bool else np.unique(idx)
         if np.array_equal(idx, np.arange(self.n_scenes)):
-            return self  # all of them: no copy (and the caches derived from the maps stay valid)
+            # all of them: no array copied (the caches derived from the maps stay valid), but a stack of
+            # its own, so the smoothings a run prepares live as long as the run, not the caller's stack
+            return replace(self)
         renumber = np.full(self.n_scenes, -1, dtype=np.int32)
         renumber[idx] = np.arange(idx.size, dtype=np.int32)
         keep = renumber[self.scene_of] >= 0
