@@ -11,7 +11,7 @@ points: numpy 60-80 ms, these kernels 8 ms on one core. The bilinear lookup read
 maps where numpy needed a packed copy of 40 full-size maps (300 MB, 0.4-0.8 s per stage).
 
 Semantics match :func:`l2e_studio.geometry.project_points` and ``in_image``: the camera frame is
-``R p + t``; points with depth <= ``min_depth`` or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
+``R p + t``; points with depth <= ``min_depth``, beyond the lens's fold (``CameraModel.max_r2``) or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
 get -1 (the far border is exclusive, so that rounding stays inside); the rest get
 ``row * W + col`` of the nearest pixel. The arithmetic is float32, as the stacked points are: a
 point within ~1e-4 px of a pixel border may round the other way than in float64.
@@ -79,19 +79,21 @@ def _pixel(xd, yd, z, K, W, H, min_depth):
 
 
 @numba.njit(**_JIT)
-def _index_radtan(px, py, pz, R, t, K, D, W, H, min_depth, out):
+def _index_radtan(px, py, pz, R, t, K, D, W, H, min_depth, r2max, out):
     for i in range(px.size):
         xc, yc, zc = _camera_xyz(px, py, pz, i, R, t)
-        xd, yd = _radtan(xc / zc, yc / zc, D)
-        out[i] = _pixel(xd, yd, zc, K, W, H, min_depth)
+        x, y = xc / zc, yc / zc
+        xd, yd = _radtan(x, y, D)
+        out[i] = _pixel(xd, yd, zc, K, W, H, min_depth) if x * x + y * y <= r2max else np.int32(-1)
 
 
 @numba.njit(**_JIT)
-def _index_equidistant(px, py, pz, R, t, K, D, W, H, min_depth, out):
+def _index_equidistant(px, py, pz, R, t, K, D, W, H, min_depth, r2max, out):
     for i in range(px.size):
         xc, yc, zc = _camera_xyz(px, py, pz, i, R, t)
-        xd, yd = _equidistant(xc / zc, yc / zc, D)
-        out[i] = _pixel(xd, yd, zc, K, W, H, min_depth)
+        x, y = xc / zc, yc / zc
+        xd, yd = _equidistant(x, y, D)
+        out[i] = _pixel(xd, yd, zc, K, W, H, min_depth) if x * x + y * y <= r2max else np.int32(-1)
 
 
 @numba.njit(nogil=True, cache=True, boundscheck=False)
@@ -107,7 +109,7 @@ def pixel_index(
     out: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N,) int32 flat index ``row * W + col`` of the pixel nearest each of the (3, N) float32
-    lidar points at ``R p + t``, or -1 for a point behind ``min_depth`` or off the image."""
+    lidar points at ``R p + t``, or -1 for a point behind ``min_depth``, beyond the lens's fold or off the image."""
     pts = np.asarray(points, dtype=np.float32)
     n = pts.shape[1]
     out = np.empty(n, np.int32) if out is None else out[:n]
@@ -116,7 +118,7 @@ def pixel_index(
     D[: camera.D.size] = camera.D
     kernel = _index_equidistant if camera.model == "equidistant" else _index_radtan
     kernel(pts[0], pts[1], pts[2], np.asarray(R, np.float32), np.asarray(t, np.float32), K, D,
-           camera.width, camera.height, np.float32(min_depth), out)
+           camera.width, camera.height, np.float32(min_depth), np.float32(camera.max_r2), out)
     return out
 
 

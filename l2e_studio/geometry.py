@@ -231,8 +231,9 @@ def project_points(points_cam: np.ndarray, camera: CameraModel) -> tuple[np.ndar
     """Project camera-frame points to pixels.
 
     Returns ``(uv, in_front)``: (N, 2) pixel coordinates (x right, y down; pixel centres at
-    integers, as OpenCV) and a mask of points with positive depth. Points behind the camera get
-    NaN pixel coordinates.
+    integers, as OpenCV) and a mask of points with positive depth within the lens's field of
+    view. Points behind the camera, or so far off axis that the lens model folds back
+    (:attr:`CameraModel.max_r2`), get NaN pixel coordinates.
     """
     uv, in_front, _ = project_with_jacobian(points_cam, camera, jacobian=False)
     return uv, in_front
@@ -265,6 +266,13 @@ def project_with_jacobian(
     inv_z[~in_front] = np.nan
     x = X * inv_z
     y = Y * inv_z
+    if np.isfinite(camera.max_r2):  # past the fold the polynomial puts unseen points in the image
+        with np.errstate(invalid="ignore"):
+            beyond = x * x + y * y > camera.max_r2
+        in_front &= ~beyond
+        inv_z[beyond] = np.nan
+        x[beyond] = np.nan
+        y[beyond] = np.nan
     xd, yd, Jd = distort(x, y, camera, jacobian)
     K = camera.K.astype(P.dtype)
     fx, fy, s, cx, cy = K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2]

@@ -88,6 +88,8 @@ class MapObjective:
         x = (Q[0] + t[0]) * inv_z
         y = (Q[1] + t[1]) * inv_z
         cam = self.stack.camera
+        if np.isfinite(cam.max_r2):  # beyond the lens's fold: not in the image
+            front &= x * x + y * y <= np.float32(cam.max_r2)
         xd, yd, Jd = distort(x, y, cam, d_out is not None)
         K = self._K
         # packed-map coordinates: map pixel (0, 0) sits at (1, 1) of the zero-padded map
