@@ -121,16 +121,18 @@ class Spread:
 
 
 def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
-    """Two disjoint point masks: alternate scenes, or (one scene) alternate vertical strips of
-    the image at ``at`` (``HALF_STRIPS`` of them). Strips, not the left and right halves: a half
-    of the image has half the lever arm for the roll about the optical axis and wanders for that
-    alone (OpenCalib manual: 19 of 60 results found to 0.14-0.22 deg refused for it), while
-    strips leave each half the whole width and still share no point."""
-    if stack.n_scenes >= 2:
-        a = (stack.scene_of % 2) == 0
+    """Two disjoint point masks: alternate places (:attr:`SceneStack.places`: scenes of a rig
+    that did not move are one place, and would agree on its bias), or (one place) alternate
+    vertical strips of the image at ``at`` (``HALF_STRIPS`` of them). Strips, not the left and
+    right halves: a half of the image has half the lever arm for the roll about the optical axis
+    and wanders for that alone (OpenCalib manual: 19 of 60 results found to 0.14-0.22 deg refused
+    for it), while strips leave each half the whole width and still share no point."""
+    if stack.n_places >= 2:
+        a = (stack.places[stack.scene_of] % 2) == 0
     else:
         uv, _ = stack.project(at)
-        a = np.floor(uv[:, 0] * (HALF_STRIPS / stack.camera.width)).astype(np.int64) % 2 == 0
+        u = np.where(np.isfinite(uv[:, 0]), uv[:, 0], -1.0)  # a point out of view (nan) reads nothing: either half will do
+        a = np.floor(u * (HALF_STRIPS / stack.camera.width)).astype(np.int64) % 2 == 0
     return a, ~a
 
 

@@ -305,45 +305,54 @@ class AxisPinned:
     """Whether the scenes pin the translation along one camera axis: the share of the score lost
     by moving ``PROBE_M`` along it (the smaller side), against the objective's need, or, where the
     peak is broader than that, both halves of the scenes climbing back to it (``returned``: how
-    far from the result the worst of them ended, m; nan where not tried); never from one scene
-    (``one_scene``: see :func:`translation_axes`)."""
+    far from the result the worst of them ended, m; nan where not tried); never from one place
+    (``one_place``: one scene, or ``scenes`` scenes of a rig that did not move; see
+    :func:`translation_axes`)."""
 
     axis: str  # "x", "y" or "z" (camera frame: right, down, forward)
     pinned: bool
     drop: float
-    one_scene: bool = False
+    one_place: bool = False
     returned: float = float("nan")
+    scenes: int = 1
 
     def line(self) -> str:
         state = "pinned" if self.pinned else "not pinned"
         text = f"{self.axis} is {state} (moving {100 * PROBE_M:.0f} cm costs {100 * self.drop:.0f} % of the score"
-        if self.one_scene:
+        advice = AXIS_ADVICE[self.axis]
+        if self.one_place and self.scenes >= 2:
+            text += f", but all {self.scenes} scenes show one place, and one place cannot pin a translation"
+            advice = f"move the rig between scenes to record other places; {advice}"
+        elif self.one_place:
             text += ", but one scene cannot pin a translation"
         elif not np.isnan(self.returned):
             text += (f"; each half of the scenes, moved {100 * PROBE_M:.0f} cm either way, climbs back to within "
                      f"{100 * self.returned:.1f} cm" if self.pinned else
                      f", and a half of the scenes moved {100 * PROBE_M:.0f} cm along it ends "
                      f"{100 * self.returned:.1f} cm from the result")
-        return f"{text})" if self.pinned else f"{text}): {AXIS_ADVICE[self.axis]}"
+        return f"{text})" if self.pinned else f"{text}): {advice}"
 
 
-def translation_axes(drops: np.ndarray, objective: str, n_scenes: int,
-                     returned: np.ndarray | None = None) -> tuple[AxisPinned, ...]:
+def translation_axes(drops: np.ndarray, objective: str, n_places: int,
+                     returned: np.ndarray | None = None, n_scenes: int | None = None) -> tuple[AxisPinned, ...]:
     """Per camera axis, whether :func:`translation_drops` shows the scenes pin it, or (where the
-    drop is short of the objective's need) ``returned`` does: the scene-disjoint halves climbing
+    drop is short of the objective's need) ``returned`` does: the halves of the places climbing
     back to within ``RETURN_M`` from ``PROBE_M`` either way (:func:`l2e_studio.evidence.climbs_back`;
     nan: not tried).
 
-    One scene pins none: its probe moves the translation with the rotation held, and a rotation of
-    a few tenths of a degree gives most of that score back; its halves (strips of one image) share
-    its structure, so they agree on its bias. On the single-scan dev rigs results whose checks all
-    passed were 3-25 cm off along axes that cost 20-47 % of the score (OpenCalib manual: x 5-7 cm off
-    at a 46 % drop, 7 % with the rotation re-fitted), and one scan climbed back along z to a
-    translation 8 cm off (OpenCalib 3)."""
+    One place pins none, be it one scene or ``n_scenes`` scenes of a rig that did not move
+    (:mod:`l2e_studio.places`). One scene's probe moves the translation with the rotation held,
+    and a rotation of a few tenths of a degree gives most of that score back; its halves (strips
+    of one image) share its structure, so they agree on its bias. On the single-scan dev rigs
+    results whose checks all passed were 3-25 cm off along axes that cost 20-47 % of the score
+    (OpenCalib manual: x 5-7 cm off at a 46 % drop, 7 % with the rotation re-fitted), and one scan
+    climbed back along z to a translation 8 cm off (OpenCalib 3). Scenes of one place are that
+    one scene again: on LCECalib's static rig a result 20 cm off passed every check of its 18."""
     need = OBSERVABLE_DROP[objective]
-    one = n_scenes < 2
+    one = n_places < 2
+    scenes = n_places if n_scenes is None else n_scenes
     returned = np.full(3, np.nan) if returned is None else np.asarray(returned, dtype=float)
-    return tuple(AxisPinned(axis, bool(d >= need or r <= RETURN_M) and not one, float(d), one, float(r))
+    return tuple(AxisPinned(axis, bool(d >= need or r <= RETURN_M) and not one, float(d), one, float(r), scenes)
                  for axis, d, r in zip("xyz", drops, returned))
 
 
@@ -394,14 +403,14 @@ def judge(
         drops = translation_drops(probed, res, probed.score(res, per_scene=False)[0])
         need = OBSERVABLE_DROP[final.objective_name]
         returned = np.full(3, np.nan)
-        if final.n_scenes >= 2:  # a broad peak: do the halves of the scenes climb back to it?
+        if final.n_places >= 2:  # a broad peak: do the halves of the places climb back to it?
             for k in np.flatnonzero(drops < need):
                 returned[k] = climbs_back(sides()[1:], res, int(k), PROBE_M, settings, cancel, steps.within)
-        axes = translation_axes(drops, final.objective_name, final.n_scenes, returned)
+        axes = translation_axes(drops, final.objective_name, final.n_places, returned, final.n_scenes)
         detail = (f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
                   + ", ".join(f"{100 * a.drop:.0f} %" for a in axes) + f" (at least {100 * need:.0f} % each")
-        if final.n_scenes < 2:
-            detail += ", from at least two scenes)"
+        if final.n_places < 2:
+            detail += ", from at least two places)"
         else:
             back = [f"{a.axis} {100 * a.returned:.1f} cm" for a in axes if not np.isnan(a.returned)]
             detail += (f", or both halves of the scenes climb back from it to within {100 * RETURN_M:.0f} cm: "

@@ -11,8 +11,13 @@ from l2e_studio.geometry import Extrinsic
 from l2e_studio.scenes import Scene
 
 
-def box_world(rng: np.random.Generator) -> tuple[Scene, CameraModel, Extrinsic]:
-    """Boxes in front of a wall, seen by a camera whose image is a rendering of the boxes' edges."""
+#: (unused, y centre, half size, depth) of each box: a face at x = depth spanning y in cy +- half, z in +-half
+BOXES = ((0.0, 2.0, 1.0, 6.0), (0.0, -2.5, 0.8, 8.0), (0.0, 0.5, 0.5, 4.0))
+
+
+def box_world(rng: np.random.Generator, boxes: tuple = BOXES, wall: float = 12.0) -> tuple[Scene, CameraModel, Extrinsic]:
+    """Boxes in front of a wall (``wall`` m away), seen by a camera whose image is a rendering of
+    the boxes' edges."""
     cam = CameraModel(np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]]), 640, 480)
     truth = Extrinsic.from_matrix(np.array([[0, -1, 0, 0.05], [0, 0, -1, -0.1], [1, 0, 0, 0.02], [0, 0, 0, 1.0]]))
     pts, inten = [], []
@@ -20,15 +25,14 @@ def box_world(rng: np.random.Generator) -> tuple[Scene, CameraModel, Extrinsic]:
     for el in np.radians(np.arange(-25, 25, 0.8)):
         for a in az:
             d = np.array([np.cos(el) * np.cos(a), np.cos(el) * np.sin(a), np.sin(el)])
-            r = 12.0
-            for cx, cy, half, depth in ((0.0, 2.0, 1.0, 6.0), (0.0, -2.5, 0.8, 8.0), (0.0, 0.5, 0.5, 4.0)):
-                # a box face at x = depth spanning y in cy +- half, z in +-half
+            r = wall
+            for cx, cy, half, depth in boxes:
                 t = depth / max(d[0], 1e-6)
                 y, z = t * d[1], t * d[2]
                 if abs(y - cy) < half and abs(z) < half and t < r:
                     r = t
             pts.append(r * d)
-            inten.append(200.0 if r < 12 else 40.0)
+            inten.append(200.0 if r < wall else 40.0)
     P = np.array(pts, dtype=np.float32)
     inten = np.array(inten, dtype=np.float32) + rng.normal(0, 3, len(P)).astype(np.float32)
     # the image: mid-grey wall, bright boxes, textured noise; plus a saturated "sky" band

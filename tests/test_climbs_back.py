@@ -18,7 +18,7 @@ from l2e_studio.verdict import AXIS_ADVICE, OBSERVABLE_DROP, PROBE_M, judge, tra
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from realdata_rigs import load_rigs, perturbations  # noqa: E402
-from box_world import box_world  # noqa: E402
+from box_world import BOXES, box_world  # noqa: E402
 
 
 def test_an_axis_short_of_the_drop_is_pinned_only_where_both_halves_climbed_back() -> None:
@@ -32,12 +32,20 @@ def test_an_axis_short_of_the_drop_is_pinned_only_where_both_halves_climbed_back
     assert not any(a.pinned for a in translation_axes(drops, "edges", 1, np.array([0.0, 0.0, 0.0])))
 
 
-def _scenes(scale: float) -> tuple[list[Scene], object, object]:
-    """Four box-world scenes, their points ``scale`` times as far (the image is drawn through
-    the truth from the scaled points: far boxes look the same, but pin no translation)."""
+def layout(i: int) -> dict:
+    """Scene ``i``'s boxes and wall: each scene another place (boxes moved sideways and in depth,
+    the wall nearer or further)."""
+    return dict(boxes=tuple((0.0, cy + 0.6 * (i % 3) - 0.6, half, depth + 0.7 * i) for _, cy, half, depth in BOXES),
+                wall=12.0 + 2.0 * i)
+
+
+def _scenes(scale: float, same_place: bool = False) -> tuple[list[Scene], object, object]:
+    """Four box-world scenes (four places, or the same one four times), their points ``scale``
+    times as far (the image is drawn through the truth from the scaled points: far boxes look
+    the same, but pin no translation)."""
     scenes = []
     for i in range(4):
-        scene, cam, truth = box_world(np.random.default_rng(10 + i))
+        scene, cam, truth = box_world(np.random.default_rng(10 + i), **({} if same_place else layout(i)))
         scenes.append(Scene(f"s{i}", scene.points * np.float32(scale), scene.intensity, scene.event_map, "image"))
     return scenes, cam, truth
 

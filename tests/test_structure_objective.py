@@ -270,6 +270,6 @@ def test_one_scene_is_split_into_strips_and_never_hands_back_its_own_translation
     verdict = judge(stack, result, settings)
     # the rotation's checks pass; the optimiser's translation is 11 cm off here, the seed's 4 cm
     assert verdict.status == "trusted-rotation", verdict.reasons
-    assert all(a.one_scene and not a.pinned for a in verdict.translation)
+    assert all(a.one_place and not a.pinned for a in verdict.translation)
     assert verdict.seed_axes == "xyz" and np.array_equal(verdict.extrinsic.translation, seed.translation)
     assert verdict.extrinsic.error_to(truth)[0] < seed.error_to(truth)[0]

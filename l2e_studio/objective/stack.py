@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 import weakref
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Callable, Sequence
 
 import numpy as np
@@ -20,6 +21,7 @@ import numpy as np
 from .. import compiled
 from ..camera import CameraModel
 from ..geometry import Extrinsic, in_image, project_points
+from ..places import places
 from ..pool import CHUNK, WORKERS, run_chunks, run_tasks
 from ..scenes import Scene
 from ..score_maps import rows, scan_directions, stack_maps
@@ -230,6 +232,17 @@ class SceneStack:
     @property
     def n_points(self) -> int:
         return self.points.shape[1]
+
+    @cached_property
+    def places(self) -> np.ndarray:
+        """(S,) the place each scene was recorded at (:func:`l2e_studio.places.places`): the
+        scenes of a rig that did not move between them share one."""
+        return places(self.points, self.scene_of, self.n_scenes)
+
+    @property
+    def n_places(self) -> int:
+        """How many different places the scenes show (:attr:`places`)."""
+        return int(self.places.max()) + 1 if self.n_scenes else 0
 
     # --- projection and the paper's MI -------------------------------------------------------
     def project(self, extrinsic: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
