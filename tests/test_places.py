@@ -81,7 +81,14 @@ def test_scenes_of_one_place_are_split_as_one_scene_and_pin_no_translation() -> 
     assert all(a.one_place and not a.pinned for a in verdict.translation)
     assert all("all 4 scenes show one place" in a.line() and "move the rig between scenes" in a.line()
                for a in verdict.translation)
-    assert verdict.to_dict()["translation_axes"]["z"]["advice"] == verdict.translation[2].line()
+    # the line reaches the terminal, the result file, the app and the report
+    from l2e_studio.app.panels.results import verdict_text
+    from l2e_studio.qa.report import verdict_html
+
+    line = verdict.translation[2].line()
+    assert f"  > {line}" in verdict.lines() and f"→ {line}" in verdict_text(verdict)
+    assert verdict.to_dict()["translation_axes"]["z"]["advice"] == line
+    assert "all 4 scenes show one place" in verdict_html(verdict.to_dict())
     if verdict.trusted:  # a rotation may be trusted; the translation is the seed's
         assert verdict.seed_axes == "xyz" and np.allclose(verdict.extrinsic.translation, seed.translation)
 
