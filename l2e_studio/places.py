@@ -26,6 +26,9 @@ RANGE_M, RANGE_REL = 0.1, 0.02
 SAME_SHARE = 0.6
 #: scenes that share fewer cells than this (too few points in common view) are different places
 MIN_CELLS = 50
+#: at most this many points (every k-th, so each scene keeps its share) are binned: 40 full-size
+#: synthetic scenes (3M points) 5k each, still some 2k cells apiece; every real dev rig whole
+MAX_POINTS = 200_000
 
 _AZ = int(round(360 / CELL_DEG))
 _EL = int(round(180 / CELL_DEG))
@@ -33,16 +36,18 @@ _EL = int(round(180 / CELL_DEG))
 
 def range_views(points: np.ndarray, scene_of: np.ndarray, n_scenes: int) -> np.ndarray:
     """(S, cells) the mean range of each scene's (3, N) lidar-frame ``points`` per direction cell
-    (nan where a scene has no point)."""
+    that some scene sees (nan where a scene has no point)."""
     P = np.asarray(points, dtype=np.float64)
     x, y, z = P
     r = np.sqrt(x * x + y * y + z * z)
-    az = np.floor((np.degrees(np.arctan2(y, x)) + 180.0) / CELL_DEG).astype(np.int64) % _AZ
-    el = np.clip(np.floor((np.degrees(np.arctan2(z, np.hypot(x, y))) + 90.0) / CELL_DEG), 0, _EL - 1).astype(np.int64)
-    key = np.asarray(scene_of, dtype=np.int64) * (_AZ * _EL) + el * _AZ + az
     ok = np.isfinite(r) & (r > 0)
-    count = np.bincount(key[ok], minlength=n_scenes * _AZ * _EL).reshape(n_scenes, -1)
-    total = np.bincount(key[ok], r[ok], minlength=n_scenes * _AZ * _EL).reshape(n_scenes, -1)
+    az = np.floor((np.degrees(np.arctan2(y[ok], x[ok])) + 180.0) / CELL_DEG).astype(np.int64) % _AZ
+    el = np.clip(np.floor((np.degrees(np.arctan2(z[ok], np.hypot(x[ok], y[ok]))) + 90.0) / CELL_DEG),
+                 0, _EL - 1).astype(np.int64)
+    cells, column = np.unique(el * _AZ + az, return_inverse=True)
+    key = np.asarray(scene_of, dtype=np.int64)[ok] * len(cells) + column.ravel()
+    count = np.bincount(key, minlength=n_scenes * len(cells)).reshape(n_scenes, -1)
+    total = np.bincount(key, r[ok], minlength=n_scenes * len(cells)).reshape(n_scenes, -1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count > 0, total / count, np.nan)
 
@@ -64,15 +69,20 @@ def places(points: np.ndarray, scene_of: np.ndarray, n_scenes: int) -> np.ndarra
     over at least ``MIN_CELLS`` cells), else starts a place of its own."""
     if n_scenes == 0:
         return np.zeros(0, dtype=np.int64)
-    views = range_views(points, scene_of, n_scenes)
+    step = -(-len(scene_of) // MAX_POINTS)
+    views = range_views(np.asarray(points)[:, ::step], np.asarray(scene_of)[::step], n_scenes)
     first: list[int] = []  # the first scene of each place
     out = np.empty(n_scenes, dtype=np.int64)
     for s in range(n_scenes):
-        for k, f in enumerate(first):
-            share, n = agreement(views[f], views[s])
-            if n >= MIN_CELLS and share >= SAME_SHARE:
-                out[s] = k
-                break
+        a, b = views[first], views[s][None, :]  # this scene against every place's first at once
+        both = np.isfinite(a) & np.isfinite(b)
+        with np.errstate(invalid="ignore"):
+            close = np.abs(a - b) <= RANGE_M + RANGE_REL * np.minimum(a, b)
+        n = both.sum(axis=1)
+        share = (close & both).sum(axis=1) / np.maximum(n, 1)
+        match = np.flatnonzero((n >= MIN_CELLS) & (share >= SAME_SHARE))
+        if match.size:
+            out[s] = match[0]
         else:
             out[s] = len(first)
             first.append(s)
