@@ -70,8 +70,10 @@ def scan_directions(camera: CameraModel, extrinsic: Extrinsic, grid: int = SCAN_
     # there: toward the radius where a strong lens's polynomial turns back (beyond the range it
     # was fitted on), undistortion finds no ray or the lens squeezes one direction to nothing
     # and the ring's direction with it; those pixels take the nearest good direction
-    sv = np.linalg.svd(J[:, :, :2] / np.diag(camera.K)[None, :2, None], compute_uv=False)
-    good = (np.isfinite(length) & (np.linalg.norm(uv - px, axis=1) < 0.5)
+    finite = np.isfinite(J).all(axis=(1, 2))  # (a ray past the lens's fold projects nowhere: nan)
+    sv = np.zeros((len(J), 2))
+    sv[finite] = np.linalg.svd(J[finite, :, :2] / np.diag(camera.K)[None, :2, None], compute_uv=False)
+    good = (finite & np.isfinite(length) & (np.linalg.norm(uv - px, axis=1) < 0.5)
             & (sv[:, 1] > MIN_LENS_CONDITION * sv[:, 0]))
     ok = good & (length > 1e-9 * np.max(length[good], initial=1.0))
     d = np.where(ok[:, None], d / np.where(ok, length, 1.0)[:, None], 0.0).reshape(len(vs), len(us), 2)

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1] / "l2e_studio"
 
 #: bottom to top; a unit is a top-level module or package of l2e_studio ("l2e_studio": its __init__)
 LAYERS = (
-    ("l2e_studio", "camera", "scoring", "errors", "atomic", "cachedir", "verdict_check", "drawing"),
+    ("l2e_studio", "camera", "scoring", "errors", "atomic", "cachedir", "verdict_check", "drawing", "places"),
     ("geometry", "compiled", "limits", "samples", "pool"),
     ("io", "synth", "checks"),
     ("scenes", "score_maps"),
