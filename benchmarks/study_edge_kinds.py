@@ -44,12 +44,14 @@ def weights_of(kind: str):
     return {"both": ENGINE, "depth": depth_only, "intensity": intensity_only}[kind]
 
 
-def shares(rig, kind: str, directions: np.ndarray) -> list[float]:
-    """Per angle of ANGLES_DEG, the share of ``directions`` there that score >= the reference."""
-    stack_module.lidar_edge_weights = weights_of(kind)
+def shares(rig, weights, directions: np.ndarray, scenes=None) -> list[float]:
+    """Per angle of ANGLES_DEG, the share of ``directions`` there that score >= the reference,
+    the stack built with the lidar edge weight function ``weights`` from ``scenes`` (default:
+    the rig's own)."""
+    stack_module.lidar_edge_weights = weights
     try:
         settings = replace(CalibrationSettings(), translation_bound=0.5, rotation_bound_deg=20.0)
-        st = stack_scenes(rig.scenes, rig.camera, rig.reference, settings).with_sigma(2.0)
+        st = stack_scenes(rig.scenes if scenes is None else scenes, rig.camera, rig.reference, settings).with_sigma(2.0)
     finally:
         stack_module.lidar_edge_weights = ENGINE
     at_ref = st.score(rig.reference, per_scene=False)[0]
@@ -57,16 +59,20 @@ def shares(rig, kind: str, directions: np.ndarray) -> list[float]:
                            >= at_ref for d in directions])) for deg in ANGLES_DEG]
 
 
+def random_directions(n: int = 24) -> np.ndarray:
+    """``n`` unit rotation axes, the same every run."""
+    d = np.random.default_rng(7).normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1)[:, None]
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rigs", default="manual,1+2,kitti_odometry_00,hitsz_vlp16,lcecalib_rlfs01,lcecalib_rles01_frame")
     args = p.parse_args()
-    rng = np.random.default_rng(7)
-    directions = rng.normal(size=(24, 3))
-    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    directions = random_directions()
     print("| rig | " + " | ".join(KINDS) + " |\n|---|" + "---|" * len(KINDS))
     for rig in load_rigs(args.rigs.split(",")):
-        cells = [" / ".join(f"{s:.2f}" for s in shares(rig, kind, directions)) for kind in KINDS]
+        cells = [" / ".join(f"{s:.2f}" for s in shares(rig, weights_of(kind), directions)) for kind in KINDS]
         print(f"| {rig.name} | " + " | ".join(cells) + " |", flush=True)
 
 

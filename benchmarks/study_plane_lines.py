@@ -30,14 +30,11 @@ from dataclasses import replace
 
 import numpy as np
 
-import l2e_studio.objective.stack as stack_module
-from l2e_studio.calibrate import CalibrationSettings, stack_scenes
 from l2e_studio.geometry import in_image, project_points
 from l2e_studio.scenes import Scene
 from realdata_rigs import load_rigs
+from study_edge_kinds import ENGINE, random_directions, shares
 
-ENGINE = stack_module.lidar_edge_weights
-ANGLES_DEG = (0.5, 1.0, 2.0, 5.0)
 THICK_M = 0.04  # a patch's points within this RMS of their plane
 MIN_POINTS = 12
 STEP_M = 0.05  # line points this far apart
@@ -150,28 +147,13 @@ def weights(line_weight: float):
     return w
 
 
-def shares(rig, scenes, line_weight: float, directions: np.ndarray) -> list[float]:
-    """Per angle of ANGLES_DEG, the share of ``directions`` there that score >= the reference."""
-    stack_module.lidar_edge_weights = weights(line_weight)
-    try:
-        settings = replace(CalibrationSettings(), translation_bound=0.5, rotation_bound_deg=20.0)
-        st = stack_scenes(scenes, rig.camera, rig.reference, settings).with_sigma(2.0)
-    finally:
-        stack_module.lidar_edge_weights = ENGINE
-    at_ref = st.score(rig.reference, per_scene=False)[0]
-    return [float(np.mean([st.score(rig.reference.perturbed(np.zeros(3), np.radians(deg) * d), per_scene=False)[0]
-                           >= at_ref for d in directions])) for deg in ANGLES_DEG]
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rigs", default="manual,1+2,kitti_odometry_00,hitsz_vlp16,lcecalib_rlfs01,lcecalib_rles01_frame")
     p.add_argument("--voxel", type=float, default=1.0)
     p.add_argument("--line-weight", type=float, default=1.0)
     args = p.parse_args()
-    rng = np.random.default_rng(7)
-    directions = rng.normal(size=(24, 3))
-    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    directions = random_directions()
     print("| rig | line points in view | engine | +lines | lines |\n|---|---|---|---|---|")
     for rig in load_rigs(args.rigs.split(",")):
         lines = [plane_lines(sc.points, args.voxel) for sc in rig.scenes]
@@ -180,7 +162,7 @@ def main() -> None:
         for variant in ("engine", "+lines", "lines"):
             scenes = rig.scenes if variant == "engine" else tuple(
                 with_lines(sc, args.voxel, variant == "lines") for sc in rig.scenes)
-            s = shares(rig, scenes, args.line_weight, directions)
+            s = shares(rig, weights(args.line_weight), directions, scenes)
             cells.append(" / ".join(f"{x:.2f}" for x in s))
         print(f"| {rig.name} | " + " | ".join(cells) + " |", flush=True)
 

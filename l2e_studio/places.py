@@ -52,15 +52,14 @@ def range_views(points: np.ndarray, scene_of: np.ndarray, n_scenes: int) -> np.n
         return np.where(count > 0, total / count, np.nan)
 
 
-def agreement(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
+def agreement(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(the share of the cells two :func:`range_views` rows both see whose ranges agree, how many
-    cells they both see)."""
+    cells they both see), over the last axis: rows broadcast, so one scene meets many at once."""
     both = np.isfinite(a) & np.isfinite(b)
-    n = int(both.sum())
-    if n == 0:
-        return 0.0, 0
-    ra, rb = a[both], b[both]
-    return float(np.mean(np.abs(ra - rb) <= RANGE_M + RANGE_REL * np.minimum(ra, rb))), n
+    with np.errstate(invalid="ignore"):
+        close = np.abs(a - b) <= RANGE_M + RANGE_REL * np.minimum(a, b)
+    n = both.sum(axis=-1)
+    return (close & both).sum(axis=-1) / np.maximum(n, 1), n
 
 
 def places(points: np.ndarray, scene_of: np.ndarray, n_scenes: int) -> np.ndarray:
@@ -74,12 +73,7 @@ def places(points: np.ndarray, scene_of: np.ndarray, n_scenes: int) -> np.ndarra
     first: list[int] = []  # the first scene of each place
     out = np.empty(n_scenes, dtype=np.int64)
     for s in range(n_scenes):
-        a, b = views[first], views[s][None, :]  # this scene against every place's first at once
-        both = np.isfinite(a) & np.isfinite(b)
-        with np.errstate(invalid="ignore"):
-            close = np.abs(a - b) <= RANGE_M + RANGE_REL * np.minimum(a, b)
-        n = both.sum(axis=1)
-        share = (close & both).sum(axis=1) / np.maximum(n, 1)
+        share, n = agreement(views[first], views[s])  # this scene against every place's first at once
         match = np.flatnonzero((n >= MIN_CELLS) & (share >= SAME_SHARE))
         if match.size:
             out[s] = match[0]
