@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from playwright.sync_api import expect
 
 from app_fixtures import free_port, screenshot, wait_for
 from test_app_browser import (app, browser, close_webgl_notice, exact_field, open_app, open_tab,  # noqa: F401
@@ -161,7 +162,11 @@ def test_far_only_pairs_get_a_warning_after_solve_pnp(laptop, app):
     app.pairs.show()
     open_tab(page, "Seed")
     page.get_by_text("Initial guess from clicked pairs").click()
-    page.get_by_role("button", name="Solve PnP").click()
+    solve = page.get_by_role("button", name="Solve PnP")
+    expect(solve).to_be_enabled()  # the browser has the server's eight pairs (CI once clicked too early)
+    solve.click()
+    wait_for(lambda: "PnP over 8 pairs" in app.pairs.status.content, timeout=30,
+             what=lambda: f"the PnP status; it reads {app.pairs.status.content!r}, pairs {len(app.pairs.pairs())}")
     page.get_by_text("PnP over 8 pairs").first.wait_for()
     page.get_by_text("add pairs close to the camera").first.wait_for()
     assert "translation uncertain by" in app.pairs.status.content or "unconstrained" in app.pairs.status.content
