@@ -185,3 +185,20 @@ def test_report_opens_in_chromium_and_every_image_loads(report):
             page.screenshot(path=str(ARTIFACTS / "report_full.png"), full_page=True)
         finally:
             browser.close()
+
+
+def test_a_report_on_scenes_of_one_place_says_they_pin_no_translation(folder, calibrated, tmp_path):
+    """Four takes of one place (the rig never moved): the report's guardrails say so, and that
+    more takes of it would not pin the translation (the count of scenes alone looks fine)."""
+    import shutil
+
+    one = tmp_path / "one_place"
+    shutil.copytree(folder, one, ignore=shutil.ignore_patterns("scene_00[1-9].*", ".l2e_cache"))
+    for k in (1, 2, 3):
+        for sub, ext in (("lidar", "txt"), ("event", "png")):
+            shutil.copy(one / sub / f"scene_000.{ext}", one / sub / f"scene_00{k}.{ext}")
+    html = tmp_path / "one.html"
+    assert cli_main(["report", "--result", str(calibrated), "--scenes", str(one), "--steps", "5",
+                     "--out", str(html)]) == 0
+    text = html.read_text()
+    assert "all 4 scenes show one place" in text and "no translation" in text

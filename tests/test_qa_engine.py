@@ -297,3 +297,17 @@ def test_report_crop_is_drawn_afresh_with_points_at_the_figures_size():
     assert 0.5 * n_full <= on_screen <= 2.0 * n_full, (n_crop, n_full)
     assert coloured(crop) >= 4 and coloured(full) >= 4, (coloured(crop), coloured(full))
     assert (xc, yc) == pytest.approx(((xf / f - box[0]) * zoom * f, (yf / f - box[1]) * zoom * f), abs=zoom * f)
+
+
+def test_the_places_guardrail_counts_places_not_scenes():
+    """On real stacks: four takes of one place warn that they pin no translation; four places do
+    not warn; a few places among many scenes say how few they are."""
+    from test_climbs_back import _scenes
+
+    for same_place, codes in ((True, ["one_place"]), (False, [])):
+        scenes, cam, truth = _scenes(1.0, same_place=same_place)
+        stack = stack_scenes(scenes, cam, truth, CalibrationSettings())
+        assert [w.code for w in guardrails.few_places(stack.places)] == codes
+    w = guardrails.few_places(np.array([0, 0, 1, 1, 1, 2]))
+    assert [x.code for x in w] == ["few_places"] and "6 scenes show only 3 places" in w[0].message
+    assert guardrails.few_places(np.array([0])) == [] and guardrails.few_places(np.arange(3)) == []

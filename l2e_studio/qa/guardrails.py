@@ -92,6 +92,25 @@ def few_scenes(n_scenes: int, std: np.ndarray | None = None, wanted_mm: float | 
     return out
 
 
+def few_places(places: np.ndarray, min_places: int = MIN_SCENES) -> list[Warning]:
+    """Scenes that repeat one view: ``places`` holds the place of each scene used
+    (:attr:`l2e_studio.objective.SceneStack.places`; scenes taken without moving the rig share
+    one). One place pins no translation however many scenes show it, as the verdict says; fewer
+    places than ``min_places`` among more scenes count as fewer scenes than they look."""
+    places = np.asarray(places)
+    n, k = len(places), len(np.unique(places))
+    if n < 2 or k == n:
+        return []
+    if k == 1:
+        return [Warning("one_place", f"all {n} scenes show one place (their lidar views agree: the rig did not move "
+                                     "between them); one place pins the rotation as one scene does and no translation, "
+                                     "however many scenes show it: record scenes at other places")]
+    if k < min_places:
+        return [Warning("few_places", f"the {n} scenes show only {k} places (scenes taken without moving the rig repeat "
+                                      f"one view); record at least {min_places} places")]
+    return []
+
+
 def flat_landscape(sweeps: list, score: str = "MI", max_half_width_m: float = 0.04, max_half_width_deg: float = 1.5,
                    ambiguous: float = 0.9) -> list[Warning]:
     """A flat axis, or a second local maximum on a 1-D sweep through the result (``score``: its name)."""

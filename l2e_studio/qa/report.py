@@ -125,6 +125,7 @@ def build(inp: ReportInputs, on_progress: Callable[[str], None] | None = None) -
     warns = (guardrails.held_out_below_seed(table) + guardrails.on_bound(inp.extrinsic, inp.seed, inp.settings)
              + guardrails.few_points(names, table.points_in_image[ri])
              + guardrails.few_scenes(len(names) - int(held.sum()), unc[0].std if unc else None, inp.wanted_mm, inp.wanted_deg)
+             + guardrails.few_places(stack.places[~np.asarray(held, bool)])
              + guardrails.flat_landscape(sw, score_name(stack.objective_name))
              + guardrails.held_out_used([n for n, h in zip(names, held) if h], inp.result.get("scenes")))
     true_err = correction(inp.truth, inp.extrinsic) if inp.truth is not None else None

@@ -81,7 +81,8 @@ class QAPanel:
             lines.append("| " + " | ".join(row) + " |")
         warns = guardrails.held_out_below_seed(table, result="result" if snap.result is not None else "current")
         ri = names.index("result" if snap.result is not None else "current")
-        warns += guardrails.few_points(table.scenes, table.points_in_image[ri]) + guardrails.few_scenes(int((~held).sum()))
+        warns += (guardrails.few_points(table.scenes, table.points_in_image[ri]) + guardrails.few_scenes(int((~held).sum()))
+                  + guardrails.few_places(stack.places[~held]))
         lines += [""] + [f"- **{w.code}**: {w.message}" for w in warns]
         self.table.content = "\n".join(lines)
         return table
