@@ -136,12 +136,9 @@ def _e_bins_scene(m, out):
             out[y, x] = np.uint8(min(max(np.rint(m[y + 1, x + 1]), 0.0), 255.0))
 
 
-# The smooth objectives' sample: projection, lens, bilinear lookup and the chain rule to the six
-# pose parameters fused, in float64 (inputs and outputs float32).
-
-
 @numba.njit(inline="always", **_JIT)
 def _radtan_jac(x, y, D):
+    """The lens (float64) and its 2x2 Jacobian d(xd, yd)/d(x, y), as geometry.distort."""
     k1, k2, p1, p2, k3, k4, k5, k6 = D[0], D[1], D[2], D[3], D[4], D[5], D[6], D[7]
     r2 = x * x + y * y
     a = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -160,6 +157,7 @@ def _radtan_jac(x, y, D):
 
 @numba.njit(inline="always", **_JIT)
 def _equidistant_jac(x, y, D):
+    """The fisheye lens (float64) and its 2x2 Jacobian, as geometry.distort."""
     r = np.sqrt(x * x + y * y)
     if r < 1e-8:
         return x, y, 1.0, 0.0, 0.0, 1.0
@@ -172,7 +170,7 @@ def _equidistant_jac(x, y, D):
     return x * scale, y * scale, scale + x * x * ds_r, x * y * ds_r, x * y * ds_r, scale + y * y * ds_r
 
 
-_BLOCK = 256  # points per block: their temporaries stay in L1
+_BLOCK = 256  # points per block: their temporaries (35 KB) stay in the nearest caches
 
 
 @numba.njit(**_JIT)
@@ -255,13 +253,14 @@ def sample_pose(
     points: np.ndarray, base: np.ndarray, R: np.ndarray, t: np.ndarray, camera: CameraModel, min_depth: float,
     maps: np.ndarray, row: int, rows: int, e_max: float, e: np.ndarray, d: np.ndarray | None = None,
 ) -> None:
-    """The smooth objectives' per-point work at pose ``R p + t``: each (3, N) float32 lidar
-    point projected through ``camera`` onto its scene's zero-padded map (pixel (x, y) of map
-    pixel-space at ``maps[base + (y + 1) * row + (x + 1)]``, ``rows`` rows), read bilinearly
-    (clamped to the padding, at most ``e_max``) into ``e``, and with ``d`` (6, N) the reading's
-    derivative by ``(dt, dw)`` of a left correction ``R = exp(dw) R0``, ``t = t0 + dt``
-    (rotation rows before the left Jacobian). Points behind ``min_depth`` or past the lens's fold
-    read the padding and have zero derivative, as do those clamped to the border."""
+    """The smooth objectives' per-point work at pose ``R p + t``, in float64: each (3, N)
+    float32 lidar point projected through ``camera``, its scene's map read bilinearly there
+    (clamped to the map's one-pixel zero padding, at most ``e_max``) into ``e``, and, with ``d``
+    (6, N), the reading's derivative by ``(dt, dw)`` of a left correction ``R = exp(dw) R0``,
+    ``t = t0 + dt`` (rotation rows before the left Jacobian). The maps are flat: pixel (x, y) of
+    a point's map is ``maps[base + (y + 1) * row + x + 1]``, each padded map ``row`` wide and
+    ``rows`` high. Points behind ``min_depth`` or past the lens's fold read the padding and have
+    zero derivative, as do those clamped to the border."""
     K = np.array([camera.K[0, 0], camera.K[1, 1], camera.K[0, 1], camera.K[0, 2], camera.K[1, 2]], np.float64)
     D = np.zeros(8, np.float64)
     D[: camera.D.size] = camera.D
