@@ -129,11 +129,11 @@ def test_sample_pose_reads_the_map_where_the_numpy_projection_puts_each_point(na
     R = Rotation.from_rotvec([0.02, -0.03, 0.01]).as_matrix()
     t = np.array([0.1, -0.05, 0.2])
     e, d = sample(pts, scene, R, t, camera, maps)
-    cam = pts.astype(np.float64) @ R.T + t
+    cam = (R.astype(np.float32) @ pts.T).T + t.astype(np.float32)  # float32, as the kernel
     uv, front = project_points(cam, camera)
     seen = front & (cam[:, 2] > MIN_DEPTH)
-    u = np.clip(uv[:, 0] + 1.0, 0.0, W + 1 - 1e-3)
-    v = np.clip(uv[:, 1] + 1.0, 0.0, H + 1 - 1e-3)
+    u = np.clip(uv[:, 0] + 1.0, 0.0, W + 1 - 1e-3).astype(np.float64)
+    v = np.clip(uv[:, 1] + 1.0, 0.0, H + 1 - 1e-3).astype(np.float64)
     ref = np.array([map_coordinates(maps[s], [[b], [a]], order=1)[0] if ok else 0.0
                     for s, a, b, ok in zip(scene, u, v, seen)])
     inside = seen & in_image(uv, camera)
