@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from app_fixtures import free_port, write_small_scenes
@@ -53,3 +52,21 @@ def test_qa_tab_table_study_export_and_report(app, scene_set, tmp_path):
     assert path.parent == app.out_dir and "scene_003 (held out)" in text and text.count("<img") >= 4 * 4
     qa.n_runs.value = 0
     assert qa.start_study() is None and "at least one run" in qa.study_text.content
+
+
+@pytest.mark.timeout(120)
+def test_qa_tab_says_when_the_scenes_show_one_place(scene_set, tmp_path):
+    """Four takes of one scene (a rig that never moved): the QA tab's guardrails say that they
+    pin no translation, where the count of scenes alone would pass; the four places do not."""
+    from dataclasses import replace
+
+    from l2e_studio.app.server import build_app
+
+    takes = [replace(scene_set.scenes[0], name=f"take_{i}") for i in range(4)]
+    for scenes, expect in ((takes, True), (scene_set.scenes, False)):
+        a = build_app(replace(scene_set, scenes=scenes), port=free_port(), out_dir=tmp_path / f"out{expect}")
+        try:
+            a.qa.score_now()
+            assert ("**one_place**: all 4 scenes show one place" in a.qa.table.content) is expect, a.qa.table.content
+        finally:
+            a.stop()
