@@ -131,7 +131,9 @@ def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
         a = (stack.places[stack.scene_of] % 2) == 0
     else:
         uv, _ = stack.project(at)
-        u = np.where(np.isfinite(uv[:, 0]), uv[:, 0], -1.0)  # a point out of view (nan) reads nothing: either half will do
+        # a point out of view (nan, or ~90 deg off the axis) reads nothing: either half will do;
+        # the bound keeps the strip index within int64
+        u = np.clip(np.where(np.isfinite(uv[:, 0]), uv[:, 0], -1.0), -1e6, 1e6)
         a = np.floor(u * (HALF_STRIPS / stack.camera.width)).astype(np.int64) % 2 == 0
     return a, ~a
 

@@ -129,3 +129,18 @@ def test_a_static_rig_hands_back_nothing_worse_than_its_seed_from_the_peak_its_s
     assert verdict.status != "trusted"
     (seed_deg, seed_m), (end_deg, end_m) = seed.error_to(rig.reference), verdict.extrinsic.error_to(rig.reference)
     assert end_deg <= seed_deg + 0.1 and end_m <= seed_m + 0.01
+
+
+def test_strips_take_any_projection_without_a_warning() -> None:
+    """One place is split in strips of the image at ``at``: points out of view, NaN or
+    projected 1e30 px off (a lens polynomial far off its axis), fall in a strip without
+    overflowing the strip index (numpy warned of an invalid cast on a real rig)."""
+    import warnings
+    from types import SimpleNamespace
+
+    uv = np.array([[5.0, 1.0], [200.0, 2.0], [np.nan, np.nan], [1e30, 0.0], [-1e30, 0.0], [np.inf, 0.0]])
+    stack = SimpleNamespace(n_places=1, project=lambda at: (uv, None), camera=SimpleNamespace(width=1280))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a, b = halves(stack, None)
+    assert a.shape == (6,) and np.array_equal(a, ~b) and a[0] and not a[1]  # strips 0 and 1 of 8
