@@ -1,4 +1,4 @@
-"""The compiled nearest-pixel lookup, pair counting and the smooth objectives' sample, against the numpy projection (which the
+"""The compiled nearest-pixel lookup and pair counting, against the numpy projection (which the
 geometry tests check against OpenCV) and a loop-by-loop count."""
 
 import numpy as np
@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import in_image, project_points
-from l2e_studio.compiled import count_events, count_pairs, e_bins, pixel_index, sample_pose
+from l2e_studio.compiled import bilinear, count_events, count_pairs, e_bins, pixel_index
 
 K = np.array([[610.0, 0.0, 322.5], [0.0, 612.0, 241.0], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -93,85 +93,29 @@ def test_e_bins_are_the_nearest_bins_of_the_padded_map():
 
 
 
-SAMPLE_CAMERAS = {**CAMERAS, "folding": CameraModel(K, W, H, D=np.array([-0.44, 0.0, 0.0, 0.0, -0.073]))}
-
-
-def padded_maps(n_scenes=3, seed=2):
-    """Smooth float32 maps with their one-pixel zero padding, flat, and the padded shape."""
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:H, 0:W]
-    maps = np.zeros((n_scenes, H + 2, W + 2), np.float32)
-    for s in range(n_scenes):
-        a, b, c = rng.uniform(0.01, 0.05, 3)
-        maps[s, 1:-1, 1:-1] = 60 + 50 * np.sin(a * xx + c) * np.cos(b * yy)
-    return maps
-
-
-def sample(points, scene, R, t, camera, maps, gradient=True):
-    n = points.shape[0]
-    e = np.empty(n, np.float32)
-    d = np.empty((6, n), np.float32) if gradient else None
-    S, Hp, Wp = maps.shape
-    sample_pose(np.ascontiguousarray(points.T), (scene * Hp * Wp).astype(np.int64), R, t, camera, MIN_DEPTH,
-                maps.reshape(-1), Wp, Hp, 126.999, e, d)
-    return e, d
-
-
-@pytest.mark.parametrize("name", sorted(SAMPLE_CAMERAS))
-def test_sample_pose_reads_the_map_where_the_numpy_projection_puts_each_point(name):
+def test_bilinear_lookup_and_its_derivatives_match_scipy_and_finite_differences():
     from scipy.ndimage import map_coordinates
 
-    camera = SAMPLE_CAMERAS[name]
-    maps = padded_maps()
-    pts = cloud(20_000)
-    rng = np.random.default_rng(4)
-    scene = rng.integers(0, 3, len(pts))
-    R = Rotation.from_rotvec([0.02, -0.03, 0.01]).as_matrix()
-    t = np.array([0.1, -0.05, 0.2])
-    e, d = sample(pts, scene, R, t, camera, maps)
-    cam = (R.astype(np.float32) @ pts.T).T + t.astype(np.float32)  # float32, as the kernel
-    uv, front = project_points(cam, camera)
-    seen = front & (cam[:, 2] > MIN_DEPTH)
-    u = np.clip(uv[:, 0] + 1.0, 0.0, W + 1 - 1e-3).astype(np.float64)
-    v = np.clip(uv[:, 1] + 1.0, 0.0, H + 1 - 1e-3).astype(np.float64)
-    ref = np.array([map_coordinates(maps[s], [[b], [a]], order=1)[0] if ok else 0.0
-                    for s, a, b, ok in zip(scene, u, v, seen)])
-    inside = seen & in_image(uv, camera)
-    assert inside.sum() > 2000 and (~seen).sum() > 2000
-    if name == "folding":  # points past the fold, which the polynomial would put in the image
-        assert (~seen & (cam[:, 2] > MIN_DEPTH)).sum() > 100
-    assert np.allclose(e, ref, atol=2e-3)
-    assert np.all(e[~seen] == 0.0) and np.all(d[:, ~seen] == 0.0)  # unseen: the padding, no pull
-    assert np.all(d[:, inside].any(axis=0) | (e[inside] == 0))
-
-
-@pytest.mark.parametrize("name", ["pinhole", "radtan", "equidistant"])
-def test_sample_pose_derivatives_are_those_of_its_reading(name):
-    """d e / d(dt, dw) against central differences of the reading itself, where the step keeps
-    every point inside its map cell (the bilinear reading is linear there)."""
-    camera = SAMPLE_CAMERAS[name]
-    maps = padded_maps()
-    rng = np.random.default_rng(5)
-    pts = np.column_stack([rng.uniform(-6, 6, 5000), rng.uniform(-3, 3, 5000), rng.uniform(4, 20, 5000)]).astype(np.float32)
-    scene = rng.integers(0, 3, len(pts))
-    R0 = Rotation.from_rotvec([0.01, 0.02, -0.01]).as_matrix()
-    t0 = np.array([0.05, 0.02, -0.1])
-    e, d = sample(pts, scene, R0, t0, camera, maps)
-    cam = pts.astype(np.float64) @ R0.T + t0
-    uv, _ = project_points(cam, camera)
-    frac = np.stack([uv[:, 0] + 1 - np.floor(uv[:, 0] + 1), uv[:, 1] + 1 - np.floor(uv[:, 1] + 1)])
-    clear = in_image(uv, camera, margin=2) & np.all((frac > 0.05) & (frac < 0.95), axis=0)
-    assert clear.sum() > 2000
-    steps = (1e-4, 1e-4, 1e-4, 2e-5, 2e-5, 2e-5)
-    for k, h in enumerate(steps):
-        def at(sign):
-            dp = np.zeros(6)
-            dp[k] = sign * h
-            R = Rotation.from_rotvec(dp[3:]).as_matrix() @ R0
-            return sample(pts, scene, R, t0 + dp[:3], camera, maps, gradient=False)[0].astype(np.float64)
-        fd = (at(1) - at(-1)) / (2 * h)
-        scale = np.abs(d[k, clear]).max()
-        assert np.abs(fd[clear] - d[k, clear]).max() < 0.02 * scale + 0.3, k  # float32 readings over a 2h step
+    rng = np.random.default_rng(2)
+    maps = rng.uniform(0, 100, (3, 20, 30)).astype(np.float32)
+    n = 2000
+    scene = rng.integers(0, 3, n)
+    uc = rng.uniform(0, 28.999, n).astype(np.float32)
+    vc = rng.uniform(0, 18.999, n).astype(np.float32)
+    uc[:5] = np.nan  # an overflowed projection reads pixel 0 of its scene, never outside
+    e, du, dv = (np.empty(n, np.float32) for _ in range(3))
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, uc, vc, e, du, dv)
+    u0 = np.nan_to_num(uc, nan=0.0)
+    ref = np.array([map_coordinates(maps[s], [[v], [u]], order=1)[0] for s, u, v in zip(scene, u0, vc)])
+    assert np.allclose(e, ref, atol=1e-3)
+    h = np.float32(1e-2)
+    e_u, e_v = np.empty(n, np.float32), np.empty(n, np.float32)
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0 + h, vc, e_u)
+    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0, vc + h, e_v)
+    same_cell = (np.floor(u0) == np.floor(u0 + h)) & (np.floor(vc) == np.floor(vc + h))
+    assert same_cell.mean() > 0.9
+    assert np.allclose(((e_u - e) / h)[same_cell], du[same_cell], atol=0.05)
+    assert np.allclose(((e_v - e) / h)[same_cell], dv[same_cell], atol=0.05)
 
 
 @pytest.mark.parametrize("dtype", [np.uint16, np.int32, np.int64])

@@ -19,7 +19,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import compiled
-from ..geometry import Extrinsic, left_jacobian
+from ..geometry import Extrinsic, distort, left_jacobian
 from ..pool import run_chunks
 from ..score_maps import CLIP
 from ..scoring import edges
@@ -37,9 +37,8 @@ class MapObjective:
     ``base``: the bilinear map lookup and its Jacobian, shared by the concrete scores.
 
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
-    Points are processed in chunks on the worker threads, each in one compiled pass that
-    projects, reads the float32 maps and chains the derivatives
-    (:func:`l2e_studio.compiled.sample_pose`).
+    Points are processed in cache-sized chunks; the projection and its Jacobian are numpy,
+    the bilinear lookup of the float32 maps is compiled (:func:`l2e_studio.compiled.bilinear`).
     """
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
@@ -54,6 +53,7 @@ class MapObjective:
         self._qw = Wp - 1  # the last column and row a lookup may start from (+1 for its neighbour)
         self._qh = Hp - 1
         self._scene_base = stack.scene_of.astype(np.int64) * (Hp * Wp)
+        self._K = stack.camera.K.astype(np.float32)
         self.n = float(stack.n_points)
 
     def extrinsic(self, delta: np.ndarray) -> Extrinsic:
@@ -68,21 +68,62 @@ class MapObjective:
     # --- internals -----------------------------------------------------------------------
     def _sample(self, delta: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """Bilinear map values e (N,) at the projected points and, with ``jacobian``, de/d(delta)
-        as (6, N) (its rotation rows still to be multiplied by the left Jacobian's transpose):
-        one compiled pass per chunk (:func:`l2e_studio.compiled.sample_pose`)."""
+        as (6, N) (its rotation rows still to be multiplied by the left Jacobian's transpose)."""
         ext = self.extrinsic(np.asarray(delta, dtype=np.float64))
+        R = ext.R.astype(np.float32)
+        t = ext.translation.astype(np.float32)
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
         d = np.empty((6, n), dtype=np.float32) if jacobian else None
-        points, cam = self.stack.points, self.stack.camera
-
-        def chunk(a: int, b: int) -> None:
-            compiled.sample_pose(points[:, a:b], self._scene_base[a:b], ext.R, ext.translation, cam, MIN_DEPTH,
-                                 self._maps, self._qw + 1, self._qh + 1, E_MAX, e[a:b],
-                                 None if d is None else d[:, a:b])
-
-        run_chunks(chunk, n)
+        run_chunks(lambda a, b: self._sample_chunk(R, t, a, b, e, d), n)
+        np.minimum(e, E_MAX, out=e)
         return e, d
+
+    def _sample_chunk(self, R, t, a, b, e_out, d_out) -> None:
+        P = self.stack.points[:, a:b]
+        Q = R @ P  # rotated points
+        Z = Q[2] + t[2]
+        front = Z > MIN_DEPTH
+        inv_z = 1.0 / np.maximum(Z, np.float32(MIN_DEPTH))
+        x = (Q[0] + t[0]) * inv_z
+        y = (Q[1] + t[1]) * inv_z
+        cam = self.stack.camera
+        if np.isfinite(cam.max_r2):  # beyond the lens's fold: not in the image
+            front &= x * x + y * y <= np.float32(cam.max_r2)
+        xd, yd, Jd = distort(x, y, cam, d_out is not None)
+        K = self._K
+        # packed-map coordinates: map pixel (0, 0) sits at (1, 1) of the zero-padded map
+        u = K[0, 0] * xd + (K[0, 2] + 1.0)
+        if K[0, 1] != 0:
+            u += K[0, 1] * yd
+        v = K[1, 1] * yd + (K[1, 2] + 1.0)
+        u_max = np.float32(self._qw - 1e-3)
+        v_max = np.float32(self._qh - 1e-3)
+        uc = np.clip(u, 0.0, u_max)
+        vc = np.clip(v, 0.0, v_max)
+        uc[~front] = 0.0
+        e = e_out[a:b]
+        de_du = np.empty_like(uc) if d_out is not None else None
+        de_dv = np.empty_like(vc) if d_out is not None else None
+        compiled.bilinear(self._maps, self._scene_base[a:b], self._qw + 1, uc, vc, e, de_du, de_dv)
+        if d_out is None:
+            return
+        # the lookup's derivatives are zero where the point was clamped to the border
+        de_du[(u <= 0.0) | (u >= u_max) | ~front] = 0.0
+        de_dv[(v <= 0.0) | (v >= v_max) | ~front] = 0.0
+        dxd_dx, dxd_dy, dyd_dx, dyd_dy = Jd
+        # chain through d(u, v)/d(x, y) and d(x, y)/d(X, Y, Z)
+        gx = de_du * (K[0, 0] * dxd_dx + K[0, 1] * dyd_dx) + de_dv * (K[1, 1] * dyd_dx)
+        gy = de_du * (K[0, 0] * dxd_dy + K[0, 1] * dyd_dy) + de_dv * (K[1, 1] * dyd_dy)
+        gX = gx * inv_z
+        gY = gy * inv_z
+        gZ = -(gx * x + gy * y) * inv_z
+        out = d_out[:, a:b]
+        out[0], out[1], out[2] = gX, gY, gZ
+        # rotation: d X_cam / d dw = -[Q]x J_l(dw), so de/d(dw) = J_l^T (Q x g)
+        out[3] = Q[1] * gZ - Q[2] * gY
+        out[4] = Q[2] * gX - Q[0] * gZ
+        out[5] = Q[0] * gY - Q[1] * gX
 
     def _chain(self, de_ddelta: np.ndarray, dscore_de: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """Gradient with respect to ``delta`` from d score / d e per point."""
