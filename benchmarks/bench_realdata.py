@@ -13,6 +13,12 @@ Also: runs started at the reference, and one-axis sweeps of the new objective (P
     python benchmarks/bench_realdata.py [--runs 20] [--rigs all|none|manual,1+2,3,kitti,<folder>...] [--sweeps]
         [--levels 1,2,5,0] [--synthetic vlp16,hdl32,hdl64,os128 [--synthetic-scenes 1,8]] [--save rows.json]
     python benchmarks/bench_realdata.py --table old.json new.json     # two saved runs side by side
+    python benchmarks/bench_realdata.py --nudge 1e-4 --save nudged.json  # every seed turned 1e-4 deg more
+    python benchmarks/bench_realdata.py --flips plain.json nudged.json   # run by run: verdicts that flipped
+
+``--nudge`` measures how much of a verdict is chance: a seed turned by a ten-thousandth of a
+degree is the same seed to any sensor, so a verdict that flips under it was decided by noise
+(stop 34: a float64 objective, equally exact, flipped 30 of 310).
 
 The engine is whatever ``l2e_studio`` imports: run once with ``PYTHONPATH`` at a checkout of an
 older commit (``git worktree add /tmp/l2e_old <commit>``) and ``--save old.json``, once here with
@@ -64,7 +70,16 @@ def board_evidence(rig):
     return lambda v, seed: with_boards(v, seed, rig.scenes, rig.camera, board, detections=found)
 
 
-def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict]:
+def nudged(seed, run: int, nudge_deg: float):
+    """``seed`` turned ``nudge_deg`` more about an axis fixed by the run's index (the same in
+    every invocation), or ``seed`` itself."""
+    if not nudge_deg:
+        return seed
+    axis = np.random.default_rng(7000 + run).normal(size=3)
+    return seed.perturbed(np.zeros(3), np.radians(nudge_deg) * axis / np.linalg.norm(axis))
+
+
+def run_rig(rig, runs: int, levels, variants, boards: bool = False, nudge_deg: float = 0.0) -> list[dict]:
     rows = []
     with_boards = board_evidence(rig) if boards and set(variants) - {"mi"} else None
     for variant in variants:
@@ -75,8 +90,8 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False) -> list[dict
         for deg, m in levels:
             li = list(LEVELS.values()).index((deg, m))  # the same seeds whichever levels run
             starts = perturbations(runs, deg, m, 1000 + li) if deg > 0 else [(np.zeros(3), np.zeros(3))] * 2
-            for dt, dr in starts:
-                seed = rig.reference.perturbed(dt, dr)
+            for k, (dt, dr) in enumerate(starts):
+                seed = nudged(rig.reference.perturbed(dt, dr), k, nudge_deg)
                 t0 = time.perf_counter()
                 aimed = stack.aimed_at(seed)  # edge maps read as the seed (not the reference) projects the scan lines
                 result = calibrate(aimed, None, seed, settings)
@@ -134,6 +149,32 @@ def table(rows: list[dict], label: str = "") -> str:
     return "\n".join(lines)
 
 
+def flips(a: list[dict], b: list[dict]) -> str:
+    """Two saved runs of the same seeds, run by run: per rig and level, the verdicts that
+    differ, how many of those at the same optimiser end (within 0.05 deg / 5 mm: a probe of the
+    verdict's own came out the other way), and trusted-but-worse in each."""
+    def group(rows):
+        g: dict = {}
+        for r in rows:
+            g.setdefault((r["rig"], r["level"], r["variant"]), []).append(r)
+        return g
+
+    ga, gb = group(a), group(b)
+    lines = ["| rig | seeds | runs | verdicts flipped | of them at the same optimiser end | trusted but worse, a / b |",
+             "|---|---|---|---|---|---|"]
+    total = [0, 0, 0]
+    for key in ga:
+        pairs = list(zip(ga[key], gb.get(key, [])))
+        flipped = [(x, y) for x, y in pairs if x["status"] != y["status"]]
+        same = sum(abs(x["opt_deg"] - y["opt_deg"]) <= 0.05 and abs(x["opt_m"] - y["opt_m"]) <= 0.005 for x, y in flipped)
+        tw = [sum(r["status"] not in ("not-trusted", "-") and r["cls"] == "worse" for r in side) for side in zip(*pairs)] \
+            if pairs else [0, 0]
+        total = [total[0] + len(pairs), total[1] + len(flipped), total[2] + same]
+        lines.append(f"| {key[0]} | {key[1]} | {len(pairs)} | {len(flipped)} | {same} | {tw[0]} / {tw[1]} |")
+    lines.append(f"| all | | {total[0]} | {total[1]} | {total[2]} | |")
+    return "\n".join(lines)
+
+
 def sweeps(rigs, path: Path) -> None:
     import matplotlib
 
@@ -178,7 +219,12 @@ def main() -> None:
     p.add_argument("--synthetic-scenes", default="1,8", help="scenes per synthetic rig, e.g. 1,8")
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
+    p.add_argument("--nudge", type=float, default=0.0, help="turn every seed this many degrees more (a fixed axis per run)")
+    p.add_argument("--flips", type=Path, nargs=2, help="two saved runs of the same seeds: verdicts that differ, run by run")
     args = p.parse_args()
+    if args.flips:
+        print(flips(*(json.loads(path.read_text()) for path in args.flips)))
+        return
     if args.table:
         rows = []
         for path in args.table:
@@ -195,7 +241,7 @@ def main() -> None:
     levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows = []
     for rig in rigs if levels else ():
-        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards)
+        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge)
         if args.save:
             args.save.write_text(json.dumps(rows, indent=1))
     print(table(rows))

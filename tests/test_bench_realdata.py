@@ -1,0 +1,38 @@
+"""The real-data benchmark's verdict-stability tools: a nudged seed is the seed turned by exactly
+the nudge about an axis fixed per run, and two saved runs compare run by run."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from bench_realdata import flips, nudged  # noqa: E402
+
+from l2e_studio.geometry import Extrinsic  # noqa: E402
+
+
+def test_a_nudge_turns_the_seed_by_itself_about_an_axis_fixed_per_run():
+    seed = Extrinsic(np.array([0.1, -0.2, 0.3]), np.array([0.5, 0.0, -0.1]))
+    assert nudged(seed, 3, 0.0) is seed
+    a, b, c = nudged(seed, 3, 1e-3), nudged(seed, 3, 1e-3), nudged(seed, 4, 1e-3)
+    assert np.allclose(a.matrix, b.matrix, rtol=0, atol=0)  # the same in every invocation
+    deg, m = seed.error_to(a)
+    assert abs(deg - 1e-3) < 1e-9 and m == 0.0
+    assert a.error_to(c)[0] > 1e-4  # another run, another axis
+
+
+def row(status, cls, opt_deg, rig="r", level="1deg/5cm"):
+    return dict(rig=rig, level=level, variant="new", status=status, cls=cls, opt_deg=opt_deg, opt_m=0.01)
+
+
+def test_flips_counts_verdicts_that_differ_run_by_run():
+    a = [row("trusted-rotation", "closer", 0.2), row("not-trusted", "kept", 0.2), row("trusted-rotation", "worse", 1.6),
+         row("not-trusted", "kept", 3.0)]
+    b = [row("not-trusted", "kept", 0.21), row("not-trusted", "kept", 0.2), row("trusted-rotation", "worse", 1.6),
+         row("trusted-rotation", "closer", 0.9)]
+    text = flips(a, b)
+    assert "| r | 1deg/5cm | 4 | 2 | 1 | 1 / 1 |" in text  # two flipped, one at the same optimiser end
+    assert text.splitlines()[-1] == "| all | | 4 | 2 | 1 | |"
