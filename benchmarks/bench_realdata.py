@@ -243,7 +243,7 @@ def main() -> None:
     for rig in rigs if levels else ():
         rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge)
         if args.save:
-            args.save.write_text(json.dumps(rows, indent=1))
+            args.save.write_text(json.dumps(rows))  # compact, as the rows kept in results/
     print(table(rows))
 
 
