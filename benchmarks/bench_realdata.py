@@ -126,6 +126,12 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False, nudge_deg: f
     return rows
 
 
+def trusted_but_worse(rows) -> int:
+    """How many of ``rows`` hand back a result judged trusted (whole or its rotation) that is
+    worse than its seed: the defect the verdict must never commit."""
+    return sum(r["status"] not in ("not-trusted", "-") and r["cls"] == "worse" for r in rows)
+
+
 def table(rows: list[dict], label: str = "") -> str:
     """One line per rig, seed level and variant: closer / kept / worse, median end error, statuses."""
     lines = ["| rig | seeds | engine | closer | kept | worse | median end error | trusted / rot. only / not | trusted but worse |",
@@ -143,7 +149,7 @@ def table(rows: list[dict], label: str = "") -> str:
         st = "-"
         if variant != "mi":
             st = "/".join(str(sum(r["status"] == s for r in sel)) for s in ("trusted", "trusted-rotation", "not-trusted"))
-            trusted_worse = str(sum(r["status"] != "not-trusted" and r["cls"] == "worse" for r in sel))
+            trusted_worse = str(trusted_but_worse(sel))
         name = "paper MI, no verdict" if variant == "mi" else (engine or {"new": "auto + verdict"}.get(variant, variant))
         lines.append(f"| {rig} | {level} | {name} | {c['closer']} | {c['kept']} | {c['worse']} | {med} | {st} | {trusted_worse} |")
     return "\n".join(lines)
@@ -167,10 +173,9 @@ def flips(a: list[dict], b: list[dict]) -> str:
         pairs = list(zip(ga[key], gb.get(key, [])))
         flipped = [(x, y) for x, y in pairs if x["status"] != y["status"]]
         same = sum(abs(x["opt_deg"] - y["opt_deg"]) <= 0.05 and abs(x["opt_m"] - y["opt_m"]) <= 0.005 for x, y in flipped)
-        tw = [sum(r["status"] not in ("not-trusted", "-") and r["cls"] == "worse" for r in side) for side in zip(*pairs)] \
-            if pairs else [0, 0]
+        tw_a, tw_b = trusted_but_worse(x for x, _ in pairs), trusted_but_worse(y for _, y in pairs)
         total = [total[0] + len(pairs), total[1] + len(flipped), total[2] + same]
-        lines.append(f"| {key[0]} | {key[1]} | {len(pairs)} | {len(flipped)} | {same} | {tw[0]} / {tw[1]} |")
+        lines.append(f"| {key[0]} | {key[1]} | {len(pairs)} | {len(flipped)} | {same} | {tw_a} / {tw_b} |")
     lines.append(f"| all | | {total[0]} | {total[1]} | {total[2]} | |")
     return "\n".join(lines)
 
