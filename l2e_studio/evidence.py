@@ -156,8 +156,7 @@ def second_score(stack: SceneStack) -> tuple[str, Callable[[Extrinsic], float]]:
     """The independent score (its name, and the score as a function of the extrinsic): edge
     agreement for camera images, the paper's MI on the raw maps for event maps."""
     if all(k == "events" for k in stack.map_kinds):
-        raw = stack.with_sigma(0.0)
-        return "paper MI on the raw maps", lambda ext: raw.mi(ext, per_scene=False)[0]
+        return "paper MI on the raw maps", stack.raw_mi()
     return "edge points on Canny edges", edge_agreement(stack)
 
 
