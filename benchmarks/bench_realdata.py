@@ -79,7 +79,8 @@ def nudged(seed, run: int, nudge_deg: float):
     return seed.perturbed(np.zeros(3), np.radians(nudge_deg) * axis / np.linalg.norm(axis))
 
 
-def run_rig(rig, runs: int, levels, variants, boards: bool = False, nudge_deg: float = 0.0) -> list[dict]:
+def run_rig(rig, runs: int, levels, variants, boards: bool = False, nudge_deg: float = 0.0,
+            details: bool = False) -> list[dict]:
     rows = []
     with_boards = board_evidence(rig) if boards and set(variants) - {"mi"} else None
     for variant in variants:
@@ -115,6 +116,7 @@ def run_rig(rig, runs: int, levels, variants, boards: bool = False, nudge_deg: f
                                  # for studying the verdict's rules offline: each check's outcome, each
                                  # axis's probe drop, and the optimiser's translation error per camera axis
                                  checks={c.name: c.passed for c in v.checks} if judged else {},
+                                 details={c.name: c.detail for c in v.checks} if judged and details else {},
                                  drops=[a.drop for a in v.translation] if judged else [],
                                  opt_dt=(result.extrinsic.translation - rig.reference.translation).tolist(),
                                  # the poses themselves (rotation vector, then translation), for scoring offline
@@ -225,6 +227,7 @@ def main() -> None:
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     p.add_argument("--nudge", type=float, default=0.0, help="turn every seed this many degrees more (a fixed axis per run)")
+    p.add_argument("--details", action="store_true", help="keep each check's words in the rows (its numbers, for study)")
     p.add_argument("--flips", type=Path, nargs=2, help="two saved runs of the same seeds: verdicts that differ, run by run")
     args = p.parse_args()
     if args.flips:
@@ -246,7 +249,7 @@ def main() -> None:
     levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows = []
     for rig in rigs if levels else ():
-        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge)
+        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge, args.details)
         if args.save:
             args.save.write_text(json.dumps(rows))  # compact, as the rows kept in results/
     print(table(rows))
