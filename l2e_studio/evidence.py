@@ -14,8 +14,9 @@ or never maximised (:func:`evidence`), and the judging's progress and cancel (:c
   of the scenes, moved off the result along it, must climb back to it;
 * **a second start**: the seed mirrored through the result; calibrated from there, it must come
   back to the result (a side peak reached from the seed seldom attracts both sides), or settle
-  on a side peak clearly below it (under the rival check's share): its climb fell short, which
-  says nothing against the result. It climbs in a thread of its own beside the other checks.
+  on a side peak clearly below it (under the rival check's share, and lower on every part of the
+  data alike): its climb fell short, which says nothing against the result. It climbs in a
+  thread of its own beside the other checks.
 
 How far those independent estimates (the halves, the second start) land from the result is its
 :class:`Spread`. The decision on all of it is :func:`l2e_studio.verdict.judge`'s.
@@ -35,7 +36,7 @@ from .calibrate import CalibrationSettings, Progress, refine
 from .camera import CameraModel
 from .geometry import Extrinsic
 from .objective import SceneStack, single_threaded_blas
-from .peaks import RIVAL_SHARE, significance_check
+from .peaks import DISTINCT_T, PARTS, RIVAL_SHARE, significance_check, told_apart
 from .scoring.edges import canny_distance, lidar_edge_weights
 from .verdict_check import Check
 
@@ -207,7 +208,8 @@ def evidence(
     them landed from ``res``. With ``settings.rotation_only`` the translation is the seed's and
     only the rotation is tested. ``steps``: progress and cancel (:func:`evidence_steps` of them).
     ``side_peaks``: a second start that settles on a side peak clearly below the result passes
-    (:func:`score_share`); off for the verdict's second chance, a rotation re-fitted to the
+    (:func:`score_share` under ``RIVAL_SHARE``, :func:`l2e_studio.peaks.told_apart` at least
+    ``DISTINCT_T``); off for the verdict's second chance, a rotation re-fitted to the
     seed's translation (on OpenCalib 1+2 from a 2 deg seed, the one re-fit that passed so ended
     1 deg further from the reference than its seed)."""
     steps = steps or Steps(evidence_steps(settings), cancel, None)
@@ -234,10 +236,14 @@ def evidence(
     deg, m = other.error_to(res)
     away = deg > limit_deg or (m > AGREE_M and not settings.rotation_only)
     share = score_share(final, res, other) if away else float("nan")
-    lower = side_peaks and share < RIVAL_SHARE  # (nan: not away, or no share to read)
+    # a side peak clearly below the result: under the rival check's share, and lower on every
+    # part of the data alike (nan: not away, or no share to read)
+    t = told_apart(final, res, other) if side_peaks and share < RIVAL_SHARE else float("nan")
+    lower = bool(t >= DISTINCT_T)
     scored = "" if np.isnan(share) else f", scoring {100 * share:.0f} % of the result's" + (
-        f" (a side peak below {100 * RIVAL_SHARE:.0f} %: its climb fell short of the result, and a lower peak is "
-        "no rival)" if lower else "")
+        "" if np.isnan(t) else f", {t:.1f} standard errors below it over {PARTS} strips of the image") + (
+        f" (a side peak clearly below the result, under {100 * RIVAL_SHARE:.0f} % and by at least {DISTINCT_T:g} "
+        "standard errors: its climb fell short, and a lower peak is no rival)" if lower else "")
     checks.append(Check("second start (rotation)" + tag, deg <= limit_deg or lower,
                         f"from a start mirrored through the result it ends {deg:.3f} deg away{scored} "
                         f"(limit {limit_deg:.2f})"))
