@@ -259,9 +259,10 @@ def evidence(
 def score_share(final: SceneStack, res: Extrinsic, other: Extrinsic) -> float:
     """``other``'s score as a share of the result's (nan where the result's is not positive: a
     share means nothing). Where the second start ended away from the result, a share below the
-    rival check's ``RIVAL_SHARE`` is a side peak clearly below it: a climb that settled short of
-    the result, which says nothing against it; nearly as high or higher is a rival, or a peak
-    the search missed."""
+    rival check's ``RIVAL_SHARE`` that every part of the data agrees on
+    (:func:`l2e_studio.peaks.told_apart`) is a side peak clearly below it: a climb that settled
+    short of the result, which says nothing against it; nearly as high or higher is a rival, or
+    a peak the search missed."""
     at = final.score(res, per_scene=False)[0]
     return float(final.score(other, per_scene=False)[0] / at) if at > 0 else float("nan")
 
