@@ -70,6 +70,28 @@ def board_evidence(rig):
     return lambda v, seed: with_boards(v, seed, rig.scenes, rig.camera, board, detections=found)
 
 
+def host() -> str:
+    """The CPU and the numeric kernels numpy and OpenBLAS chose on it: a climb's rounding,
+    and with it about one verdict in ten on a single scan, follows them (stop 36: the same
+    commit on two hosts flipped 27 of 310 verdicts), so saved rows say where they ran."""
+    import platform
+
+    from threadpoolctl import threadpool_info
+
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
+    except (OSError, StopIteration):
+        cpu = platform.processor() or platform.machine()
+    blas = ", ".join(dict.fromkeys(f"{i['internal_api']} {i.get('architecture', '')}".strip()
+                                   for i in threadpool_info() if i["user_api"] == "blas"))
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy < 2
+        features = {}
+    simd = next((k for k in ("AVX512_SKX", "AVX512F", "AVX2", "NEON", "SSE42") if features.get(k)), "baseline")
+    return f"{cpu}; {blas or 'no BLAS'}; numpy {simd}"
+
+
 def nudged(seed, run: int, nudge_deg: float):
     """``seed`` turned ``nudge_deg`` more about an axis fixed by the run's index (the same in
     every invocation), or ``seed`` itself."""
@@ -179,6 +201,10 @@ def flips(a: list[dict], b: list[dict]) -> str:
         total = [total[0] + len(pairs), total[1] + len(flipped), total[2] + same]
         lines.append(f"| {key[0]} | {key[1]} | {len(pairs)} | {len(flipped)} | {same} | {tw_a} / {tw_b} |")
     lines.append(f"| all | | {total[0]} | {total[1]} | {total[2]} | |")
+    hosts = [{r.get("host", "not recorded") for r in rows} for rows in (a, b)]
+    if hosts[0] != hosts[1]:
+        lines.append(f"\nran on different hosts (a: {', '.join(sorted(hosts[0]))}; b: {', '.join(sorted(hosts[1]))}): "
+                     "their rounding alone flips verdicts")
     return "\n".join(lines)
 
 
@@ -247,9 +273,9 @@ def main() -> None:
     if args.sweeps:
         sweeps(rigs, OUT / "realdata_sweeps.png")
     levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
-    rows = []
+    rows, where = [], host()
     for rig in rigs if levels else ():
-        rows += run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge, args.details)
+        rows += [dict(r, host=where) for r in run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge, args.details)]
         if args.save:
             args.save.write_text(json.dumps(rows))  # compact, as the rows kept in results/
     print(table(rows))
