@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_realdata import flips, nudged  # noqa: E402
+from bench_realdata import flips, host, nudged  # noqa: E402
 
 from l2e_studio.geometry import Extrinsic  # noqa: E402
 
@@ -36,3 +36,13 @@ def test_flips_counts_verdicts_that_differ_run_by_run():
     text = flips(a, b)
     assert "| r | 1deg/5cm | 4 | 2 | 1 | 1 / 1 |" in text  # two flipped, one at the same optimiser end
     assert text.splitlines()[-1] == "| all | | 4 | 2 | 1 | |"
+
+
+def test_flips_say_when_the_two_ran_on_different_hosts():
+    here = host()
+    cpu, blas, simd = here.split("; ")  # the CPU and the kernels that round a climb
+    assert cpu and blas != "no BLAS" and simd.startswith("numpy ")
+    a = [dict(row("trusted-rotation", "closer", 0.2), host=here)]
+    assert flips(a, [dict(r) for r in a]).splitlines()[-1].startswith("| all |")  # one host: nothing said
+    text = flips(a, [dict(a[0], host="another CPU; openblas SkylakeX; numpy AVX512_SKX")])
+    assert text.splitlines()[-1].startswith("ran on different hosts") and "SkylakeX" in text and here in text
