@@ -459,7 +459,7 @@ def judge(
                        replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
                        cancel, steps.within)
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks, rot_spread = evidence(final, seed, refit, rotation, second, cancel, steps, side_peaks=False)
+        rot_checks, rot_spread = evidence(final, seed, refit, rotation, second, cancel, steps)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return trusted("trusted-rotation", refit, "xyz", tuple(checks) + tuple(rot_checks), rot_spread)

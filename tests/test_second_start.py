@@ -9,7 +9,7 @@ import pytest
 
 from l2e_studio import evidence
 from l2e_studio.calibrate import CalibrationSettings
-from l2e_studio.evidence import mirrored_start, score_share, second_score
+from l2e_studio.evidence import score_share, second_score
 from l2e_studio.objective import SceneStack
 from l2e_studio.peaks import DISTINCT_T, RIVAL_SHARE, told_apart
 
@@ -31,10 +31,11 @@ def test_a_clearly_lower_end_is_a_side_peak_and_a_nearly_as_high_one_is_not(edge
     assert score_share(stack, far, truth) > 1.0 or np.isnan(score_share(stack, far, truth))
 
 
-def _evidence_with_second_start_at(monkeypatch, stack, seed, res, end, side_peaks=True):
+def _evidence_with_second_start_at(monkeypatch, stack, seed, res, end, rotation_only=False):
     """``evidence`` of ``res`` where the second start's climb ends at ``end`` (the halves climb for real)."""
     real = evidence.refine
-    start = mirrored_start(seed, res)
+    settings = CalibrationSettings(objective="edges", global_search=False, rotation_only=rotation_only)
+    start, _ = evidence._second_start(seed, res, settings, stack.camera)
 
     def refine(st, begin, settings, *args, **kwargs):
         if np.allclose(begin.matrix, start.matrix):
@@ -42,8 +43,7 @@ def _evidence_with_second_start_at(monkeypatch, stack, seed, res, end, side_peak
         return real(st, begin, settings, *args, **kwargs)
 
     monkeypatch.setattr(evidence, "refine", refine)
-    settings = CalibrationSettings(objective="edges", global_search=False)
-    return evidence.evidence(stack, seed, res, settings, second_score(stack), side_peaks=side_peaks)
+    return evidence.evidence(stack, seed, res, settings, second_score(stack))
 
 
 def test_a_second_start_that_ends_on_a_lower_side_peak_passes_and_is_no_part_of_the_spread(edge_stack, monkeypatch):
@@ -62,9 +62,13 @@ def test_a_second_start_that_ends_on_a_lower_side_peak_passes_and_is_no_part_of_
     rot = {c.name: c for c in unsure}["second start (rotation)"]
     assert not rot.passed and "2.0 standard errors below it" in rot.detail and "clearly" not in rot.detail
     monkeypatch.setattr(evidence, "told_apart", told_apart)
-    # the verdict's second chance (a rotation re-fitted to the seed's translation) is not so lenient
-    strict, _ = _evidence_with_second_start_at(monkeypatch, stack, seed, truth, side, side_peaks=False)
-    assert not {c.name: c for c in strict}["second start (rotation)"].passed
+    # the verdict's second chance, a rotation re-fitted to the seed's translation (here the
+    # truth's), reads a clearly lower side peak alike
+    seed_r = truth.perturbed(np.zeros(3), np.radians([1.0, -1.5, 0.5]))
+    side_r = truth.perturbed(np.zeros(3), np.radians([0.0, 3.0, 0.0]))
+    again, _ = _evidence_with_second_start_at(monkeypatch, stack, seed_r, truth, side_r, rotation_only=True)
+    rot = {c.name: c for c in again}["second start (rotation) (rotation only)"]
+    assert rot.passed and "a side peak clearly below the result" in rot.detail, rot.detail
 
 
 def test_a_second_start_that_ends_away_nearly_as_high_still_fails(edge_stack, monkeypatch):
