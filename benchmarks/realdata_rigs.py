@@ -84,6 +84,13 @@ def load_rigs(names: list[str] | None = None) -> list[Rig]:
     return rigs
 
 
+def each_scene(rigs: list[Rig]) -> list[Rig]:
+    """Every scene of ``rigs`` as a single-scan rig of its own (``<rig>/<scene>``, the same camera and
+    reference): one rig's scans, calibrated apart, are as many single-scan rigs whose answers must
+    agree with each other, the sharper test of a verdict than one scan's reference."""
+    return [Rig(f"{r.name}/{s.name}", r.camera, r.reference, (s,), r.board) for r in rigs for s in r.scenes]
+
+
 def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """``n`` (dt, drotvec) offsets of exactly ``m`` metres and ``deg`` degrees, random axes and directions."""
     rng = np.random.default_rng(rng_seed)

@@ -10,8 +10,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_realdata import flips, host, nudged  # noqa: E402
+from realdata_rigs import Rig, each_scene  # noqa: E402
 
+from l2e_studio.camera import CameraModel  # noqa: E402
 from l2e_studio.geometry import Extrinsic  # noqa: E402
+from l2e_studio.scenes import Scene  # noqa: E402
 
 
 def test_a_nudge_turns_the_seed_by_itself_about_an_axis_fixed_per_run():
@@ -46,3 +49,13 @@ def test_flips_say_when_the_two_ran_on_different_hosts():
     assert flips(a, [dict(r) for r in a]).splitlines()[-1].startswith("| all |")  # one host: nothing said
     text = flips(a, [dict(a[0], host="another CPU; openblas SkylakeX; numpy AVX512_SKX")])
     assert text.splitlines()[-1].startswith("ran on different hosts") and "SkylakeX" in text and here in text
+
+
+def test_each_scene_makes_every_scan_a_rig_of_its_own():
+    camera = CameraModel(np.array([[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]]), 64, 48)
+    reference = Extrinsic(np.zeros(3), np.array([0.1, 0.0, 0.0]))
+    scenes = tuple(Scene(f"s{i}", np.full((5, 3), float(i)), np.zeros(5), np.zeros((48, 64), np.float32)) for i in range(3))
+    rigs = each_scene([Rig("drive", camera, reference, scenes), Rig("one", camera, reference, scenes[:1])])
+    assert [r.name for r in rigs] == ["drive/s0", "drive/s1", "drive/s2", "one/s0"]
+    assert all(len(r.scenes) == 1 and r.camera is camera and r.reference is reference for r in rigs)
+    assert [r.scenes[0].points[0, 0] for r in rigs] == [0.0, 1.0, 2.0, 0.0]
