@@ -392,7 +392,7 @@ def judge(
     final = stack.with_sigma(settings.sigma)
     steps.check()
     second = second_score(final)
-    checks, spread = evidence(final, seed, res, settings, second, cancel, steps)
+    checks, spread = evidence(stack, seed, res, settings, second, cancel, steps)
     sides = functools.cache(lambda: [final, *(final.select(m) for m in halves(final, seed))])  # the data, its halves: once
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
@@ -459,7 +459,7 @@ def judge(
                        replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
                        cancel, steps.within)
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks, rot_spread = evidence(final, seed, refit, rotation, second, cancel, steps)
+        rot_checks, rot_spread = evidence(stack, seed, refit, rotation, second, cancel, steps)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return trusted("trusted-rotation", refit, "xyz", tuple(checks) + tuple(rot_checks), rot_spread)

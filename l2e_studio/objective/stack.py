@@ -62,7 +62,8 @@ class SceneStack:
     scan_axis: np.ndarray | None = None  # the lidar's z axis in the camera frame that ``scan`` was projected for
     #: the stacks :meth:`with_sigma` derived from this one, by (sigma, scale), the latest
     #: ``SMOOTHED_KEEP``: every climb of a global search, and the verdict's probes after it, climb
-    #: the same stages, whose maps are then prepared once (not copied to stacks derived otherwise)
+    #: the same stages, whose maps are then prepared once (a :meth:`select`ion shares them; stacks
+    #: derived otherwise start without)
     _smoothed: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # --- construction ------------------------------------------------------------------
@@ -185,16 +186,19 @@ class SceneStack:
 
     def select(self, keep: np.ndarray) -> "SceneStack":
         """Keep the points where the boolean mask ``keep`` is true, or those at the increasing
-        indices ``keep`` (the maps are shared, not copied)."""
+        indices ``keep`` (the maps are shared, not copied, the smoothings :meth:`with_sigma` has
+        prepared included)."""
         keep = np.asarray(keep)
         keep = keep if keep.dtype == bool else keep.astype(np.intp)
-        return replace(
-            self,
-            points=np.ascontiguousarray(self.points[:, keep]),
-            l_bins=self.l_bins[keep],
-            scene_of=self.scene_of[keep],
-            weights=None if self.weights is None else self.weights[keep],
-        )
+        points = dict(points=np.ascontiguousarray(self.points[:, keep]), l_bins=self.l_bins[keep],
+                      scene_of=self.scene_of[keep], weights=None if self.weights is None else self.weights[keep])
+        out = replace(self, **points)
+        # the smoothings this stack prepared serve the selection too (the same maps, its points):
+        # a part of the data climbs the stages of a run without preparing them again
+        with _SMOOTHED_LOCK:
+            prepared = list(self._smoothed.items())
+        out._smoothed.update((key, replace(st, **points)) for key, st in prepared)
+        return out
 
     def subset(self, scenes: Sequence[int] | np.ndarray) -> "SceneStack":
         """The stack of only some scenes (indices or a boolean mask), in their original order."""
