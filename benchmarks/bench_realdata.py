@@ -83,8 +83,9 @@ def host() -> str:
         cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
     except (OSError, StopIteration):
         cpu = platform.processor() or platform.machine()
-    blas = ", ".join(dict.fromkeys(f"{i['internal_api']} {i.get('architecture', '')}".strip()
-                                   for i in threadpool_info() if i["user_api"] == "blas"))
+    # sorted: the order is the order the libraries were loaded in, which is no property of the host
+    blas = ", ".join(sorted({f"{i['internal_api']} {i.get('architecture', '')}".strip()
+                             for i in threadpool_info() if i["user_api"] == "blas"}))
     try:
         from numpy._core._multiarray_umath import __cpu_features__ as features
     except ImportError:  # numpy < 2
