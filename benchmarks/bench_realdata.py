@@ -12,7 +12,7 @@ Also: runs started at the reference, and one-axis sweeps of the new objective (P
 
     python benchmarks/bench_realdata.py [--runs 20] [--rigs all|none|manual,1+2,3,kitti,<folder>...] [--sweeps]
         [--levels 1,2,5,0] [--synthetic vlp16,hdl32,hdl64,os128 [--synthetic-scenes 1,8]] [--save rows.json]
-    python benchmarks/bench_realdata.py --rigs 1+2,kitti_odometry_00 --each-scene  # every scan a rig of its own
+    python benchmarks/bench_realdata.py --rigs 1+2,kitti_odometry_00 --split 1  # every scan a rig of its own
     python benchmarks/bench_realdata.py --table old.json new.json     # two saved runs side by side
     python benchmarks/bench_realdata.py --nudge 1e-4 --save nudged.json  # every seed turned 1e-4 deg more
     python benchmarks/bench_realdata.py --flips plain.json nudged.json   # run by run: verdicts that flipped
@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from realdata_rigs import each_scene, load_rigs, perturbations, synthetic_rigs  # noqa: E402
+from realdata_rigs import load_rigs, perturbations, split, synthetic_rigs  # noqa: E402
 
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  # noqa: E402
 from l2e_studio.verdict import judge  # noqa: E402
@@ -252,8 +252,8 @@ def main() -> None:
     p.add_argument("--synthetic", help="also synthetic rigs (a known truth: an unseen rig's stand-in): spinning "
                                        "lidars, e.g. vlp16,hdl64 (--rigs none: those alone)")
     p.add_argument("--synthetic-scenes", default="1,8", help="scenes per synthetic rig, e.g. 1,8")
-    p.add_argument("--each-scene", action="store_true",
-                   help="every scene of the rigs a single-scan rig of its own (<rig>/<scene>)")
+    p.add_argument("--split", type=int, default=0,
+                   help="every K consecutive scenes of the rigs a rig of their own (1: every scan alone)")
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     p.add_argument("--nudge", type=float, default=0.0, help="turn every seed this many degrees more (a fixed axis per run)")
@@ -272,8 +272,8 @@ def main() -> None:
     rigs = load_rigs(args.rigs.split(",")) if args.rigs != "none" else []
     if args.synthetic:
         rigs += synthetic_rigs(args.synthetic.split(","), [int(k) for k in args.synthetic_scenes.split(",")])
-    if args.each_scene:
-        rigs = each_scene(rigs)
+    if args.split:
+        rigs = split(rigs, args.split)
     if not rigs:
         sys.exit("no real data found under ../shared/realdata (set L2E_REALDATA)")
     if args.sweeps:

@@ -84,11 +84,14 @@ def load_rigs(names: list[str] | None = None) -> list[Rig]:
     return rigs
 
 
-def each_scene(rigs: list[Rig]) -> list[Rig]:
-    """Every scene of ``rigs`` as a single-scan rig of its own (``<rig>/<scene>``, the same camera and
-    reference): one rig's scans, calibrated apart, are as many single-scan rigs whose answers must
-    agree with each other, the sharper test of a verdict than one scan's reference."""
-    return [Rig(f"{r.name}/{s.name}", r.camera, r.reference, (s,), r.board) for r in rigs for s in r.scenes]
+def split(rigs: list[Rig], k: int = 1) -> list[Rig]:
+    """Every ``k`` consecutive scenes of ``rigs`` as a rig of their own (``<rig>/<first scene>``,
+    ``+<n>`` for more than one; the same camera and reference; a short last group is dropped):
+    one rig's scans, calibrated apart, are as many rigs whose answers must agree with each other,
+    the sharper test of a verdict than one scan's reference."""
+    return [Rig(f"{r.name}/{r.scenes[i].name}" + (f"+{k - 1}" if k > 1 else ""), r.camera, r.reference,
+                r.scenes[i:i + k], r.board)
+            for r in rigs for i in range(0, len(r.scenes) - k + 1, k)]
 
 
 def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.ndarray, np.ndarray]]:

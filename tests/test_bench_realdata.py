@@ -10,7 +10,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_realdata import flips, host, nudged  # noqa: E402
-from realdata_rigs import Rig, each_scene  # noqa: E402
+from realdata_rigs import Rig, split  # noqa: E402
 
 from l2e_studio.camera import CameraModel  # noqa: E402
 from l2e_studio.geometry import Extrinsic  # noqa: E402
@@ -51,11 +51,14 @@ def test_flips_say_when_the_two_ran_on_different_hosts():
     assert text.splitlines()[-1].startswith("ran on different hosts") and "SkylakeX" in text and here in text
 
 
-def test_each_scene_makes_every_scan_a_rig_of_its_own():
+def test_split_makes_every_k_scans_a_rig_of_their_own():
     camera = CameraModel(np.array([[100.0, 0, 32], [0, 100.0, 24], [0, 0, 1]]), 64, 48)
     reference = Extrinsic(np.zeros(3), np.array([0.1, 0.0, 0.0]))
-    scenes = tuple(Scene(f"s{i}", np.full((5, 3), float(i)), np.zeros(5), np.zeros((48, 64), np.float32)) for i in range(3))
-    rigs = each_scene([Rig("drive", camera, reference, scenes), Rig("one", camera, reference, scenes[:1])])
-    assert [r.name for r in rigs] == ["drive/s0", "drive/s1", "drive/s2", "one/s0"]
+    scenes = tuple(Scene(f"s{i}", np.full((5, 3), float(i)), np.zeros(5), np.zeros((48, 64), np.float32)) for i in range(5))
+    rigs = split([Rig("drive", camera, reference, scenes), Rig("one", camera, reference, scenes[:1])])
+    assert [r.name for r in rigs] == ["drive/s0", "drive/s1", "drive/s2", "drive/s3", "drive/s4", "one/s0"]
     assert all(len(r.scenes) == 1 and r.camera is camera and r.reference is reference for r in rigs)
-    assert [r.scenes[0].points[0, 0] for r in rigs] == [0.0, 1.0, 2.0, 0.0]
+    assert [r.scenes[0].points[0, 0] for r in rigs] == [0.0, 1.0, 2.0, 3.0, 4.0, 0.0]
+    pairs = split([Rig("drive", camera, reference, scenes), Rig("one", camera, reference, scenes[:1])], 2)
+    assert [r.name for r in pairs] == ["drive/s0+1", "drive/s2+1"]  # the short last group and rig are dropped
+    assert [[s.name for s in r.scenes] for r in pairs] == [["s0", "s1"], ["s2", "s3"]]
