@@ -281,7 +281,8 @@ def main() -> None:
     levels = [LEVELS[int(k)] for k in args.levels.split(",")] if args.runs > 0 else []  # --runs 0: sweeps only
     rows, where = [], host()
     for rig in rigs if levels else ():
-        rows += [dict(r, host=where) for r in run_rig(rig, args.runs, levels, args.variants.split(","), args.boards, args.nudge, args.details)]
+        rows += [dict(r, host=where) for r in run_rig(rig, args.runs, levels, args.variants.split(","), args.boards,
+                                                      args.nudge, args.details)]
         if args.save:
             args.save.write_text(json.dumps(rows))  # compact, as the rows kept in results/
     print(table(rows))

@@ -205,12 +205,13 @@ def evidence(
     """The checks of ``res`` against ``seed`` on ``stack`` (the stack the run climbed, holding the
     smoothings of its stages), ``second`` being :func:`second_score` of it at the final smoothing,
     and how far the independent estimates among them landed from ``res``. With
-    ``settings.rotation_only`` the translation is the seed's and only the rotation is tested. ``steps``: progress and cancel (:func:`evidence_steps` of them).
-    A second start that settles on a side peak clearly below the result passes
-    (:func:`score_share` under ``RIVAL_SHARE``, :func:`l2e_studio.peaks.told_apart` at least
-    ``DISTINCT_T``), for the verdict's re-fitted rotation as for the result: without the strips'
-    test, the re-fit's rule had trusted a rotation on OpenCalib 1+2 1 deg further from the
-    reference than its seed (stop 35); with it, it changed none of 814 dev-rig verdicts (stop 36)."""
+    ``settings.rotation_only`` the translation is the seed's and only the rotation is tested.
+    ``steps``: progress and cancel (:func:`evidence_steps` of them). A second start that settles
+    on a side peak clearly below the result passes (:func:`score_share` under ``RIVAL_SHARE``,
+    :func:`l2e_studio.peaks.told_apart` at least ``DISTINCT_T``), for the verdict's re-fitted
+    rotation as for the result: without the strips' test, the re-fit's rule had trusted a
+    rotation on OpenCalib 1+2 1 deg further from the reference than its seed (stop 35); with it,
+    it changed none of 814 dev-rig verdicts (stop 36)."""
     steps = steps or Steps(evidence_steps(settings), cancel, None)
     final = stack.with_sigma(settings.sigma)
     tag = " (rotation only)" if settings.rotation_only else ""
