@@ -155,6 +155,216 @@ def _bilinear(maps, base, row, uc, vc, e, de_du, de_dv, gradient):
             de_dv[i] = bot - top
 
 
+@numba.njit(inline="always", **_JIT)
+def _radtan_jacobian(x, y, D):
+    k1, k2, p1, p2, k3, k4, k5, k6 = D[0], D[1], D[2], D[3], D[4], D[5], D[6], D[7]
+    r2 = x * x + y * y
+    a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    radial = a / b
+    xy = x * y
+    xd = x * radial + 2 * p1 * xy + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * xy
+    da = k1 + r2 * (2 * k2 + r2 * 3 * k3)
+    db = k4 + r2 * (2 * k5 + r2 * 3 * k6)
+    drad = (da * b - a * db) / (b * b)
+    cross = 2 * xy * drad + 2 * p1 * x + 2 * p2 * y
+    return (xd, yd, radial + 2 * x * x * drad + 2 * p1 * y + 6 * p2 * x, cross, cross,
+            radial + 2 * y * y * drad + 6 * p1 * y + 2 * p2 * x)
+
+
+@numba.njit(inline="always", **_JIT)
+def _equidistant_jacobian(x, y, D):
+    r = np.sqrt(x * x + y * y)
+    th = np.arctan(r)
+    th2 = th * th
+    thd = th * (1 + th2 * (D[0] + th2 * (D[1] + th2 * (D[2] + th2 * D[3]))))
+    if r < 1e-8:
+        return x, y, np.float32(1.0), np.float32(0.0), np.float32(0.0), np.float32(1.0)
+    scale = thd / r
+    dthd = 1 + th2 * (3 * D[0] + th2 * (5 * D[1] + th2 * (7 * D[2] + th2 * 9 * D[3])))
+    ds_r = (dthd / (1 + r * r) * r - thd) / (r * r * r)  # d(scale)/dr / r: d(scale)/dx = x ds_r
+    return x * scale, y * scale, scale + x * x * ds_r, x * y * ds_r, x * y * ds_r, scale + y * y * ds_r
+
+
+@numba.njit(inline="always", **_JIT)
+def _camera_point(px, py, pz, i, R, t, K, D, equidistant, r2max, min_depth, jacobian):
+    """Point i in the camera frame (rotated only: q0..q2), its normalised coordinates x, y and
+    1 / depth, its packed-map coordinates u, v (map pixel (0, 0) at (1, 1) of the zero-padded
+    map), whether the camera sees it, and with ``jacobian`` the lens's d(xd, yd)/d(x, y)."""
+    q0 = R[0, 0] * px[i] + R[0, 1] * py[i] + R[0, 2] * pz[i]
+    q1 = R[1, 0] * px[i] + R[1, 1] * py[i] + R[1, 2] * pz[i]
+    q2 = R[2, 0] * px[i] + R[2, 1] * py[i] + R[2, 2] * pz[i]
+    zc = q2 + t[2]
+    inv_z = np.float32(1.0) / (zc if zc > min_depth else min_depth)
+    x = (q0 + t[0]) * inv_z
+    y = (q1 + t[1]) * inv_z
+    front = (zc > min_depth) & (x * x + y * y <= r2max)
+    one, zero = np.float32(1.0), np.float32(0.0)
+    if jacobian:
+        if equidistant:
+            xd, yd, j00, j01, j10, j11 = _equidistant_jacobian(x, y, D)
+        else:
+            xd, yd, j00, j01, j10, j11 = _radtan_jacobian(x, y, D)
+    else:
+        xd, yd = _equidistant(x, y, D) if equidistant else _radtan(x, y, D)
+        j00, j01, j10, j11 = one, zero, zero, one
+    u = K[0] * xd + K[2] * yd + K[3]
+    v = K[1] * yd + K[4]
+    return q0, q1, q2, x, y, inv_z, u, v, front, j00, j01, j10, j11
+
+
+@numba.njit(inline="always", **_JIT)
+def _coordinates_of(px, py, pz, i, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
+    _, _, _, _, _, _, u, v, front, _, _, _, _ = _camera_point(px, py, pz, i, R, t, K, D, equidistant, r2max,
+                                                              min_depth, False)
+    a = u if u >= 0 else np.float32(0.0)  # (NaN, an overflowed projection, too)
+    b = v if v >= 0 else np.float32(0.0)
+    uc[i] = (a if a <= u_max else u_max) if front else np.float32(0.0)  # not seen: reads column 0
+    vc[i] = b if b <= v_max else v_max
+    ku[i] = np.float32(1.0) if front & (u > 0) & (u < u_max) else np.float32(0.0)
+    kv[i] = np.float32(1.0) if front & (v > 0) & (v < v_max) else np.float32(0.0)
+
+
+@numba.njit(**_JIT)
+def _lookup_coordinates(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
+    """Loop 1 (one per lens model, so that each vectorises): each point's clamped lookup
+    coordinates, and whether its value has a derivative along u and v (1) or was clamped to the
+    border or is not seen (0)."""
+    if equidistant:
+        for i in range(px.size):
+            _coordinates_of(px, py, pz, i, R, t, K, D, True, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
+    else:
+        for i in range(px.size):
+            _coordinates_of(px, py, pz, i, R, t, K, D, False, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
+
+
+@numba.njit(inline="always", **_JIT)
+def _bilinear_at(maps, base, row, u, v):
+    iu = np.int64(u)  # u, v >= 0: truncation is the floor
+    iv = np.int64(v)
+    fu = u - np.float32(iu)
+    fv = v - np.float32(iv)
+    k = base + iv * row + iu
+    m00, m01, m10, m11 = maps[k], maps[k + 1], maps[k + row], maps[k + row + 1]
+    top = m00 + fu * (m01 - m00)
+    bot = m10 + fu * (m11 - m10)
+    return top + fv * (bot - top), (m01 - m00) + fv * ((m11 - m10) - (m01 - m00)), bot - top
+
+
+@numba.njit(**_JIT)
+def _lookup(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, maps, base, row, u_max, v_max, e_max, e,
+            de_du, de_dv, derivatives):
+    n = px.size
+    uc, vc = np.empty(n, np.float32), np.empty(n, np.float32)
+    ku, kv = np.empty(n, np.float32), np.empty(n, np.float32)
+    _lookup_coordinates(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
+    for i in range(n):  # loop 2: the gather (the maps are read once per evaluation: memory-bound)
+        value, du, dv = _bilinear_at(maps, base[i], row, uc[i], vc[i])
+        e[i] = value if value < e_max else e_max
+        if derivatives:
+            de_du[i] = ku[i] * du
+            de_dv[i] = kv[i] * dv
+
+
+@numba.njit(inline="always", **_JIT)
+def _weighted_derivatives(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, w, de_du, de_dv):
+    """Sum over the points of d(u, v)/d(dt, dw) weighted by w (de/du, de/dv)."""
+    g0 = g1 = g2 = g3 = g4 = g5 = 0.0
+    for i in range(px.size):
+        q0, q1, q2, x, y, inv_z, _, _, _, j00, j01, j10, j11 = _camera_point(px, py, pz, i, R, t, K, D, equidistant,
+                                                                             r2max, min_depth, True)
+        # chain through d(u, v)/d(x, y) and d(x, y)/d(X, Y, Z)
+        wu, wv = w[i] * de_du[i], w[i] * de_dv[i]
+        gx = wu * (K[0] * j00 + K[2] * j10) + wv * (K[1] * j10)
+        gy = wu * (K[0] * j01 + K[2] * j11) + wv * (K[1] * j11)
+        gX = gx * inv_z
+        gY = gy * inv_z
+        gZ = -(gx * x + gy * y) * inv_z
+        g0 += gX
+        g1 += gY
+        g2 += gZ
+        # rotation: d X_cam / d dw = -[Q]x J_l(dw), so de/d(dw) = J_l^T (Q x g)
+        g3 += q1 * gZ - q2 * gY
+        g4 += q2 * gX - q0 * gZ
+        g5 += q0 * gY - q1 * gX
+    return g0, g1, g2, g3, g4, g5
+
+
+@numba.njit(**_JIT)
+def _lookup_gradient(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, w, de_du, de_dv, out):
+    # loop 3 (vectorised, one per lens model): the projection again, with the lens's Jacobian
+    if equidistant:
+        g = _weighted_derivatives(px, py, pz, R, t, K, D, True, r2max, min_depth, w, de_du, de_dv)
+    else:
+        g = _weighted_derivatives(px, py, pz, R, t, K, D, False, r2max, min_depth, w, de_du, de_dv)
+    out[0], out[1], out[2], out[3], out[4], out[5] = g
+
+
+class Lookup:
+    """The smooth objectives' per-point work on a chunk of lidar points, each pass one compiled
+    loop or two: the points projected at ``R p + t`` (lens distortion included) and the float32
+    maps read there bilinearly, with the lookup's derivatives along u and v (:meth:`values`);
+    the derivatives' sum, weighted, with respect to a correction ``(dt, dw)`` of the extrinsic
+    (:meth:`gradient`: the projection again, which costs less than writing a 6 x N Jacobian).
+
+    ``maps``: the flat zero-padded maps, scene s's pixel (x, y) at ``scene_base + (y + 1) * row
+    + x + 1``; coordinates are clamped to ``u_max``, ``v_max`` so the neighbour at +1 exists. A
+    point behind ``min_depth`` or past the lens's fold reads column 0 and has no derivative, nor
+    has a point clamped to the border along the clamped coordinate."""
+
+    def __init__(self, camera: CameraModel, maps: np.ndarray, scene_base: np.ndarray, row: int,
+                 u_max: float, v_max: float, min_depth: float, e_max: float) -> None:
+        K = camera.K
+        # (+1: the one-pixel padding)
+        self._K = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2] + 1.0, K[1, 2] + 1.0], np.float32)
+        self._D = np.zeros(8, np.float32)
+        self._D[: camera.D.size] = camera.D
+        self._equidistant = camera.model == "equidistant"
+        self._r2max = np.float32(camera.max_r2)
+        self._maps, self._base, self._row = maps, scene_base, np.int64(row)
+        self._u_max, self._v_max = np.float32(u_max), np.float32(v_max)
+        self._min_depth, self._e_max = np.float32(min_depth), np.float32(e_max)
+
+    def values(self, points: np.ndarray, a: int, b: int, R: np.ndarray, t: np.ndarray, e: np.ndarray,
+               de_du: np.ndarray | None = None, de_dv: np.ndarray | None = None) -> None:
+        """Fill ``e[a:b]`` with the map values (at most ``e_max``) at points ``a:b`` of the (3, N)
+        float32 ``points`` at the float32 ``R``, ``t``, and, when given, ``de_du[a:b]`` and
+        ``de_dv[a:b]`` with the lookup's derivatives."""
+        derivatives = de_du is not None and de_dv is not None
+        du, dv = (de_du[a:b], de_dv[a:b]) if derivatives else (e[:0], e[:0])
+        _lookup(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._equidistant,
+                self._r2max, self._min_depth, self._maps, self._base[a:b], self._row, self._u_max, self._v_max,
+                self._e_max, e[a:b], du, dv, derivatives)
+
+    def gradient(self, points: np.ndarray, a: int, b: int, R: np.ndarray, t: np.ndarray, w: np.ndarray,
+                 de_du: np.ndarray, de_dv: np.ndarray, out: np.ndarray) -> None:
+        """``out`` (6,) float64 = the sum over points ``a:b`` of ``w[i] (de_du[i] du_i + de_dv[i]
+        dv_i)``, ``(du_i, dv_i)`` the derivatives of point i's map coordinates with respect to
+        ``(dt, dw)`` (the rotation's part still to be multiplied by the left Jacobian's transpose)."""
+        _lookup_gradient(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._equidistant,
+                         self._r2max, self._min_depth, w[a:b], de_du[a:b], de_dv[a:b], out)
+
+
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _soft_histogram(offset, e, h):
+    for i in range(e.size):
+        b = np.int32(e[i])
+        f = np.float64(e[i]) - b
+        h[offset[i] + b] += 1.0 - f
+        h[offset[i] + b + 1] += f
+
+
+def soft_histogram(offset: np.ndarray, e: np.ndarray, size: int) -> np.ndarray:
+    """(size,) float64 histogram: each point's weight split linearly between bins
+    ``offset[i] + floor(e[i])`` and the next (``e >= 0``, float32; ``offset`` int32, its bin's
+    row of the joint histogram), in one pass where ``bincount`` needed two and their temporaries.
+    The last bin takes what a point at the top of the last row would put past it."""
+    h = np.zeros(size + 1)
+    _soft_histogram(offset, e, h)
+    return h[:size]
+
+
 def e_bins(padded_map: np.ndarray, out: np.ndarray) -> None:
     """Fill ``out`` (H, W) uint8 with the E bin (nearest of 0..255) of each pixel of the
     (H+2, W+2) one-pixel-padded float32 map."""

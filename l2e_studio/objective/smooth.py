@@ -19,11 +19,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .. import compiled
-from ..geometry import Extrinsic, distort, left_jacobian
-from ..pool import run_chunks
+from ..geometry import Extrinsic, left_jacobian
+from ..pool import CHUNK, run_chunks
 from ..score_maps import CLIP
 from ..scoring import edges
-from ..scoring.mi import N_BINS, entropy, kernel_matrix, silverman_bandwidth, weighted_std
+from ..scoring.mi import N_BINS, entropy, kernel_matrix, silverman_bandwidth, smooth_joint, weighted_std
 
 if TYPE_CHECKING:
     from .stack import SceneStack
@@ -34,11 +34,12 @@ E_MAX = np.float32(CLIP["image"] - 1e-3)  # keeps bin b + 1 inside the histogram
 
 class MapObjective:
     """A smooth score of a fixed point set as a function of a local correction ``delta`` of
-    ``base``: the bilinear map lookup and its Jacobian, shared by the concrete scores.
+    ``base``: the bilinear map lookup and its derivatives, shared by the concrete scores.
 
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
-    Points are processed in cache-sized chunks; the projection and its Jacobian are numpy,
-    the bilinear lookup of the float32 maps is compiled (:func:`l2e_studio.compiled.bilinear`).
+    Points are processed in cache-sized chunks on the engine's threads, each chunk in one
+    compiled loop (:class:`l2e_studio.compiled.Lookup`): the values at the points, then, for the
+    gradient, the sum of their derivatives weighted by d score / d value.
     """
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
@@ -49,11 +50,10 @@ class MapObjective:
         dt, dw = base.delta_to(base if start is None else start)
         self.start = np.concatenate([dt, dw])  # ``start`` as a correction of ``base``
         S, Hp, Wp = stack.maps.shape
-        self._maps = stack.maps.reshape(-1)
-        self._qw = Wp - 1  # the last column and row a lookup may start from (+1 for its neighbour)
-        self._qh = Hp - 1
-        self._scene_base = stack.scene_of.astype(np.int64) * (Hp * Wp)
-        self._K = stack.camera.K.astype(np.float32)
+        # the last column and row a lookup may start from, less a hair: its neighbour at +1 exists
+        self._lookup = compiled.Lookup(stack.camera, stack.maps.reshape(-1),
+                                       stack.scene_of.astype(np.int64) * (Hp * Wp), Wp,
+                                       Wp - 1 - 1e-3, Hp - 1 - 1e-3, MIN_DEPTH, E_MAX)
         self.n = float(stack.n_points)
 
     def extrinsic(self, delta: np.ndarray) -> Extrinsic:
@@ -66,69 +66,31 @@ class MapObjective:
         raise NotImplementedError
 
     # --- internals -----------------------------------------------------------------------
-    def _sample(self, delta: np.ndarray, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """Bilinear map values e (N,) at the projected points and, with ``jacobian``, de/d(delta)
-        as (6, N) (its rotation rows still to be multiplied by the left Jacobian's transpose)."""
+    def _pose(self, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ext = self.extrinsic(np.asarray(delta, dtype=np.float64))
-        R = ext.R.astype(np.float32)
-        t = ext.translation.astype(np.float32)
+        return ext.R.astype(np.float32), ext.translation.astype(np.float32)
+
+    def _sample(self, delta: np.ndarray, derivatives: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+        """Bilinear map values e (N,) float32 at the points projected at ``delta`` (at most
+        E_MAX) and, with ``derivatives``, the lookup's (de/du, de/dv) for :meth:`_gradient`."""
+        R, t = self._pose(delta)
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
-        d = np.empty((6, n), dtype=np.float32) if jacobian else None
-        run_chunks(lambda a, b: self._sample_chunk(R, t, a, b, e, d), n)
-        np.minimum(e, E_MAX, out=e)
-        return e, d
+        d = (np.empty(n, dtype=np.float32), np.empty(n, dtype=np.float32)) if derivatives else (None, None)
+        run_chunks(lambda a, b: self._lookup.values(self.stack.points, a, b, R, t, e, *d), n)
+        return e, d if derivatives else None
 
-    def _sample_chunk(self, R, t, a, b, e_out, d_out) -> None:
-        P = self.stack.points[:, a:b]
-        Q = R @ P  # rotated points
-        Z = Q[2] + t[2]
-        front = Z > MIN_DEPTH
-        inv_z = 1.0 / np.maximum(Z, np.float32(MIN_DEPTH))
-        x = (Q[0] + t[0]) * inv_z
-        y = (Q[1] + t[1]) * inv_z
-        cam = self.stack.camera
-        if np.isfinite(cam.max_r2):  # beyond the lens's fold: not in the image
-            front &= x * x + y * y <= np.float32(cam.max_r2)
-        xd, yd, Jd = distort(x, y, cam, d_out is not None)
-        K = self._K
-        # packed-map coordinates: map pixel (0, 0) sits at (1, 1) of the zero-padded map
-        u = K[0, 0] * xd + (K[0, 2] + 1.0)
-        if K[0, 1] != 0:
-            u += K[0, 1] * yd
-        v = K[1, 1] * yd + (K[1, 2] + 1.0)
-        u_max = np.float32(self._qw - 1e-3)
-        v_max = np.float32(self._qh - 1e-3)
-        uc = np.clip(u, 0.0, u_max)
-        vc = np.clip(v, 0.0, v_max)
-        uc[~front] = 0.0
-        e = e_out[a:b]
-        de_du = np.empty_like(uc) if d_out is not None else None
-        de_dv = np.empty_like(vc) if d_out is not None else None
-        compiled.bilinear(self._maps, self._scene_base[a:b], self._qw + 1, uc, vc, e, de_du, de_dv)
-        if d_out is None:
-            return
-        # the lookup's derivatives are zero where the point was clamped to the border
-        de_du[(u <= 0.0) | (u >= u_max) | ~front] = 0.0
-        de_dv[(v <= 0.0) | (v >= v_max) | ~front] = 0.0
-        dxd_dx, dxd_dy, dyd_dx, dyd_dy = Jd
-        # chain through d(u, v)/d(x, y) and d(x, y)/d(X, Y, Z)
-        gx = de_du * (K[0, 0] * dxd_dx + K[0, 1] * dyd_dx) + de_dv * (K[1, 1] * dyd_dx)
-        gy = de_du * (K[0, 0] * dxd_dy + K[0, 1] * dyd_dy) + de_dv * (K[1, 1] * dyd_dy)
-        gX = gx * inv_z
-        gY = gy * inv_z
-        gZ = -(gx * x + gy * y) * inv_z
-        out = d_out[:, a:b]
-        out[0], out[1], out[2] = gX, gY, gZ
-        # rotation: d X_cam / d dw = -[Q]x J_l(dw), so de/d(dw) = J_l^T (Q x g)
-        out[3] = Q[1] * gZ - Q[2] * gY
-        out[4] = Q[2] * gX - Q[0] * gZ
-        out[5] = Q[0] * gY - Q[1] * gX
-
-    def _chain(self, de_ddelta: np.ndarray, dscore_de: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        """Gradient with respect to ``delta`` from d score / d e per point."""
-        g = (de_ddelta @ dscore_de.astype(np.float32)).astype(np.float64)
-        g[3:] = left_jacobian(delta[3:]).T @ g[3:]
+    def _gradient(self, delta: np.ndarray, dscore_de: np.ndarray, de_duv: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Gradient with respect to ``delta`` of a score whose derivative by each point's value
+        is ``dscore_de`` (N,), the lookup's derivatives being ``de_duv`` (:meth:`_sample`'s)."""
+        R, t = self._pose(delta)
+        w = dscore_de.astype(np.float32, copy=False)
+        n = self.stack.n_points
+        parts = np.zeros((-(-n // CHUNK), 6))  # one row per chunk: summed in a fixed order
+        run_chunks(lambda a, b: self._lookup.gradient(self.stack.points, a, b, R, t, w, *de_duv, parts[a // CHUNK]), n)
+        g = parts.sum(axis=0)
+        g[3:] = left_jacobian(np.asarray(delta, dtype=np.float64)[3:]).T @ g[3:]
         return g
 
 
@@ -144,13 +106,11 @@ class EdgeObjective(MapObjective):
         self._w = (stack.weights / (edges.SCALE * max(total, 1e-12))).astype(np.float32)
 
     def value(self, delta: np.ndarray) -> float:
-        e, _ = self._sample(np.asarray(delta, dtype=np.float64), jacobian=False)
-        return float(self._w @ (e - np.float32(edges.OFFSET)))
+        return float(self._w @ (self._sample(delta)[0] - np.float32(edges.OFFSET)))
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
-        delta = np.asarray(delta, dtype=np.float64)
-        e, de_ddelta = self._sample(delta, jacobian=True)
-        return float(self._w @ (e - np.float32(edges.OFFSET))), self._chain(de_ddelta, self._w, delta)
+        e, d = self._sample(delta, derivatives=True)
+        return float(self._w @ (e - np.float32(edges.OFFSET))), self._gradient(delta, self._w, d)
 
 
 class MIObjective(MapObjective):
@@ -165,49 +125,45 @@ class MIObjective(MapObjective):
         self._l_offset = (stack.l_bins * N_BINS).astype(np.int32)
         hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
         self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
-        joint = self._soft_histogram(self._sample(self.start, jacobian=False)[0])
+        joint = self._soft_histogram(self._sample(self.start)[0])
         self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
-        self._A_l = kernel_matrix(self.h_l)
-        self._A_e = kernel_matrix(self.h_e)
-        self._H_l = entropy(self._A_l @ (hist_l / self.n))
+        self._H_l = entropy(kernel_matrix(self.h_l) @ (hist_l / self.n))
 
     def value(self, delta: np.ndarray) -> float:
         """MI (nats) at ``base`` corrected by ``delta``."""
-        e, _ = self._sample(delta, jacobian=False)
-        return self._mi_and_weights(self._soft_histogram(e), need_weights=False)[0]
+        return self._mi_and_weights(self._soft_histogram(self._sample(delta)[0]), need_weights=False)[0]
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
         """MI and its gradient with respect to ``delta``."""
-        delta = np.asarray(delta, dtype=np.float64)
-        e, de_ddelta = self._sample(delta, jacobian=True)
+        e, d = self._sample(delta, derivatives=True)
         mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
         # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
         j = self._l_offset + e.astype(np.int32)
-        return mi, self._chain(de_ddelta, W[j + 1] - W[j], delta)
+        return mi, self._gradient(delta, W[j + 1] - W[j], d)
 
     def _soft_histogram(self, e: np.ndarray) -> np.ndarray:
         """(256, 256) joint histogram with E linearly split between its two nearest bins."""
-        b = e.astype(np.int32)
-        frac = e - b
-        j = self._l_offset + b
-        size = N_BINS * N_BINS
-        h = np.bincount(j, weights=1.0 - frac, minlength=size + 1)
-        h[1:] += np.bincount(j, weights=frac, minlength=size + 1)[:-1]
-        return h[:size].reshape(N_BINS, N_BINS)
+        return compiled.soft_histogram(self._l_offset, e, N_BINS * N_BINS).reshape(N_BINS, N_BINS)
 
     def _mi_and_weights(self, joint: np.ndarray, need_weights: bool):
+        """MI of the (256, 256) soft joint histogram and, with ``need_weights``, d MI / d joint
+        (flat, one trailing 0 for the bin past the last)."""
         n = self.n
-        A_l, A_e = self._A_l, self._A_e
-        p_le = A_l @ (joint / n) @ A_e.T
-        p_e = A_e @ (joint.sum(axis=0) / n)
-        mi = self._H_l + entropy(p_e) - entropy(p_le)
+        p_le = smooth_joint(joint / n, self.h_l, self.h_e)
+        p_e = p_le.sum(axis=0)  # smoothing commutes with marginalisation (A_l's columns sum to one)
+        log_le, log_e = _log(p_le), _log(p_e)
+        mi = self._H_l - float(p_e @ log_e) + float(np.sum(p_le * log_le))
         if not need_weights:
             return mi, None
-        tiny = 1e-300
-        g_le = -(np.log(np.maximum(p_le, tiny)) + 1.0)  # dH/dp
-        g_e = -(np.log(np.maximum(p_e, tiny)) + 1.0)
-        W = ((A_e.T @ g_e)[None, :] - A_l.T @ g_le @ A_e) / n
+        # dH/dp = -(log p + 1) (MI has +H(E), -H(L, E)) taken back through the smoothing: its
+        # kernel matrices are symmetric, so their adjoints are the same filter
+        W = (smooth_joint(log_le + 1.0, self.h_l, self.h_e) - smooth_joint((log_e + 1.0)[None, :], 0.0, self.h_e)) / n
         return mi, np.append(W.reshape(-1), 0.0)
+
+
+def _log(p: np.ndarray) -> np.ndarray:
+    """``log p`` where p > 0, a large negative number where p == 0 (there ``p log p`` is 0)."""
+    return np.log(np.maximum(p, 1e-300))
 
 
 def single_threaded_blas():
