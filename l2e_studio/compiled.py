@@ -1,7 +1,8 @@
 """The engine's per-point and per-pixel loops, compiled (numba): the nearest pixel of each
 projected lidar point, the (L, E) pair counts the paper's MI is made of, the maps' E bins, the
-bilinear lookup (with its derivatives) the optimiser's smooth objectives read the maps with, and
-the per-event count of a raw recording's window into its event map.
+bilinear lookup (with its derivatives) the optimiser's smooth objectives read the maps with, the
+soft histogram and the separable smoothing of the smooth MI, and the per-event count of a raw
+recording's window into its event map.
 
 The reported MI reads every point of every scene at every evaluation (3M points for 40 scenes),
 and the workbench's readout does it on each key press. As numpy expressions, projection with
@@ -9,6 +10,15 @@ lens distortion is some twenty passes over the points, each a temporary the size
 one fused loop keeps each point in registers and lets the compiler vectorise it. Measured on 3M
 points: numpy 60-80 ms, these kernels 8 ms on one core. The bilinear lookup reads the float32
 maps where numpy needed a packed copy of 40 full-size maps (300 MB, 0.4-0.8 s per stage).
+
+The smooth objectives' evaluation (:class:`Lookup`) is three loops per chunk of points: the
+projection (vectorised; one loop per lens model, a branch on the model inside kept it scalar, 6x
+slower), the gather from the maps (scalar and memory-bound: a 400k-point evaluation at full size
+touches 800k cache lines of 150 MB of maps), and for the gradient the projection again with the
+lens's Jacobian, summing the weighted derivatives (cheaper than writing and reading back a 6 x N
+Jacobian). On 40 full-size scenes a final-stage value and gradient went from 32 ms (numpy
+projection, compiled gather) to 16 ms, the 40-scene optimisation with its verdict from 4.5 s to
+2.8-3.0 s (``benchmarks/bench_engine.py``, 2 cores).
 
 Semantics match :func:`l2e_studio.geometry.project_points` and ``in_image``: the camera frame is
 ``R p + t``; points with depth <= ``min_depth``, beyond the lens's fold (``CameraModel.max_r2``) or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
@@ -134,25 +144,6 @@ def _e_bins_scene(m, out):
     for y in range(h):
         for x in range(w):
             out[y, x] = np.uint8(min(max(np.rint(m[y + 1, x + 1]), 0.0), 255.0))
-
-
-@numba.njit(**_JIT)
-def _bilinear(maps, base, row, uc, vc, e, de_du, de_dv, gradient):
-    for i in range(uc.size):
-        u = uc[i] if uc[i] >= 0 else np.float32(0.0)  # NaN (an overflowed projection) reads pixel 0
-        v = vc[i] if vc[i] >= 0 else np.float32(0.0)
-        uf = np.floor(u)
-        vf = np.floor(v)
-        fu = u - uf
-        fv = v - vf
-        k = base[i] + np.int64(vf) * row + np.int64(uf)
-        m00, m01, m10, m11 = maps[k], maps[k + 1], maps[k + row], maps[k + row + 1]
-        top = m00 + fu * (m01 - m00)
-        bot = m10 + fu * (m11 - m10)
-        e[i] = top + fv * (bot - top)
-        if gradient:
-            de_du[i] = (m01 - m00) + fv * ((m11 - m10) - (m01 - m00))
-            de_dv[i] = bot - top
 
 
 @numba.njit(inline="always", **_JIT)
@@ -365,23 +356,64 @@ def soft_histogram(offset: np.ndarray, e: np.ndarray, size: int) -> np.ndarray:
     return h[:size]
 
 
+@numba.njit(inline="always", **_JIT)
+def _reflect(i, n):
+    """Index i of a line of n mirrored about its ends (d c b a | a b c d | d c b a), once."""
+    return -i - 1 if i < 0 else (2 * n - i - 1 if i >= n else i)
+
+
+@numba.njit(**_JIT)
+def _separable(x, taps_rows, taps_cols, out):
+    n_r, n_c = x.shape
+    rr, rc = taps_rows.size // 2, taps_cols.size // 2
+    rows = np.zeros((n_r, n_c))
+    for r in range(n_r):  # along the columns of x: whole rows at a time
+        for k in range(taps_rows.size):
+            w = taps_rows[k]
+            src = _reflect(r + k - rr, n_r)
+            for c in range(n_c):
+                rows[r, c] += w * x[src, c]
+    line = np.empty(n_c + 2 * rc)
+    for r in range(n_r):  # along the rows: each padded once
+        for c in range(n_c + 2 * rc):
+            line[c] = rows[r, _reflect(c - rc, n_c)]
+        for c in range(n_c):
+            out[r, c] = 0.0
+        for k in range(taps_cols.size):
+            w = taps_cols[k]
+            for c in range(n_c):
+                out[r, c] += w * line[c + k]
+
+
+def separable(x: np.ndarray, taps_rows: np.ndarray, taps_cols: np.ndarray) -> np.ndarray:
+    """``x`` (float64, 2D) filtered by the symmetric ``taps_rows`` along its columns and
+    ``taps_cols`` along its rows, the border reflected (``scipy.ndimage``'s "reflect", OpenCV's
+    ``BORDER_REFLECT``) once: each filter's radius must be under the side it runs along."""
+    if taps_rows.size // 2 >= x.shape[0] or taps_cols.size // 2 >= x.shape[1]:
+        raise ValueError("a filter reaches past the far side of the array")
+    out = np.empty(x.shape)
+    _separable(np.ascontiguousarray(x, dtype=np.float64), np.asarray(taps_rows, np.float64),
+               np.asarray(taps_cols, np.float64), out)
+    return out
+
+
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _bin_slopes(table, offset, e, out):
+    for i in range(e.size):
+        j = offset[i] + np.int32(e[i])
+        out[i] = table[j + 1] - table[j]
+
+
+def bin_slopes(table: np.ndarray, offset: np.ndarray, e: np.ndarray, out: np.ndarray) -> None:
+    """``out[i] = table[j + 1] - table[j]`` (float32), ``j = offset[i] + floor(e[i])``: what a
+    score read through :func:`soft_histogram` gains per unit of each point's ``e``."""
+    _bin_slopes(table, offset, e, out)
+
+
 def e_bins(padded_map: np.ndarray, out: np.ndarray) -> None:
     """Fill ``out`` (H, W) uint8 with the E bin (nearest of 0..255) of each pixel of the
     (H+2, W+2) one-pixel-padded float32 map."""
     _e_bins_scene(padded_map, out)
-
-
-def bilinear(
-    maps: np.ndarray, base: np.ndarray, row: int, uc: np.ndarray, vc: np.ndarray, e: np.ndarray,
-    de_du: np.ndarray | None = None, de_dv: np.ndarray | None = None,
-) -> None:
-    """Bilinear lookup of the flat float32 ``maps`` at (``uc``, ``vc``): pixel (x, y) of a point
-    is ``maps[base + y * row + x]``, and both coordinates must leave room for the neighbour at
-    +1. Fills ``e`` and, when given, the lookup's derivatives ``de_du`` and ``de_dv``."""
-    gradient = de_du is not None and de_dv is not None
-    if not gradient:
-        de_du = de_dv = e[:0]
-    _bilinear(maps, base, np.int64(row), uc, vc, e, de_du, de_dv, gradient)
 
 
 @numba.njit(nogil=True, cache=True, boundscheck=False)

@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import in_image, project_points
-from l2e_studio.compiled import bilinear, count_events, count_pairs, e_bins, pixel_index
+from l2e_studio.compiled import Lookup, count_events, count_pairs, e_bins, pixel_index, separable, soft_histogram
+from l2e_studio.scoring.mi import kernel_matrix, kernel_taps
 
 K = np.array([[610.0, 0.0, 322.5], [0.0, 612.0, 241.0], [0.0, 0.0, 1.0]])
 W, H = 640, 480
@@ -93,29 +94,106 @@ def test_e_bins_are_the_nearest_bins_of_the_padded_map():
 
 
 
-def test_bilinear_lookup_and_its_derivatives_match_scipy_and_finite_differences():
+def lookup_rig(camera, n_scenes=3, seed=5):
+    """Padded maps of ``camera``'s size, each a bilinear function of the pixel (which bilinear
+    interpolation reproduces exactly: the lookup is then a smooth function of the pose, and
+    finite differences test the projection's chain), and a :class:`Lookup` reading them."""
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    rng = np.random.default_rng(seed)
+    maps = np.zeros((n_scenes, H + 2, W + 2), np.float32)
+    for s in range(n_scenes):
+        a, b, c = rng.uniform(0.05, 0.12, 3)
+        maps[s, 1:-1, 1:-1] = 40 + a * u + b * v + c * 2e-3 * (u - 300) * (v - 200)
+    scene_base = lambda scene: (scene * (H + 2) * (W + 2)).astype(np.int64)  # noqa: E731
+    return maps, scene_base, Lookup(camera, maps.reshape(-1), np.zeros(0, np.int64), W + 2, W + 1 - 1e-3,
+                                    H + 1 - 1e-3, MIN_DEPTH, 254.999)
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_lookup_values_are_the_float64_projection_read_bilinearly(name):
     from scipy.ndimage import map_coordinates
 
-    rng = np.random.default_rng(2)
-    maps = rng.uniform(0, 100, (3, 20, 30)).astype(np.float32)
-    n = 2000
-    scene = rng.integers(0, 3, n)
-    uc = rng.uniform(0, 28.999, n).astype(np.float32)
-    vc = rng.uniform(0, 18.999, n).astype(np.float32)
-    uc[:5] = np.nan  # an overflowed projection reads pixel 0 of its scene, never outside
-    e, du, dv = (np.empty(n, np.float32) for _ in range(3))
-    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, uc, vc, e, du, dv)
-    u0 = np.nan_to_num(uc, nan=0.0)
-    ref = np.array([map_coordinates(maps[s], [[v], [u]], order=1)[0] for s, u, v in zip(scene, u0, vc)])
-    assert np.allclose(e, ref, atol=1e-3)
-    h = np.float32(1e-2)
-    e_u, e_v = np.empty(n, np.float32), np.empty(n, np.float32)
-    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0 + h, vc, e_u)
-    bilinear(maps.reshape(-1), (scene * 600).astype(np.int64), 30, u0, vc + h, e_v)
-    same_cell = (np.floor(u0) == np.floor(u0 + h)) & (np.floor(vc) == np.floor(vc + h))
-    assert same_cell.mean() > 0.9
-    assert np.allclose(((e_u - e) / h)[same_cell], du[same_cell], atol=0.05)
-    assert np.allclose(((e_v - e) / h)[same_cell], dv[same_cell], atol=0.05)
+    camera = CAMERAS[name]
+    maps, scene_base, look = lookup_rig(camera)
+    p = cloud(40_000)
+    scene = np.random.default_rng(1).integers(0, 3, len(p))
+    look._base = scene_base(scene)
+    R = Rotation.from_rotvec([0.05, -0.2, 0.03]).as_matrix()
+    t = np.array([0.1, -0.05, 0.2])
+    e, du, dv = (np.empty(len(p), np.float32) for _ in range(3))
+    pts = np.ascontiguousarray(p.T)
+    look.values(pts, 0, len(p), R.astype(np.float32), t.astype(np.float32), e, du, dv)
+    uv, seen = project_points(p.astype(np.float64) @ R.T + t, camera)
+    seen &= (p.astype(np.float64) @ R.T + t)[:, 2] > MIN_DEPTH
+    u = np.clip(np.nan_to_num(uv[:, 0], nan=-1.0) + 1.0, 0.0, W + 1 - 1e-3)
+    v = np.clip(np.nan_to_num(uv[:, 1], nan=-1.0) + 1.0, 0.0, H + 1 - 1e-3)
+    u[~seen] = 0.0  # a point the camera does not see reads column 0 (the padding, mostly)
+    ref = np.array([map_coordinates(maps[s], [[b], [a]], order=1)[0] for s, a, b in zip(scene, u, v)])
+    assert seen.sum() > 3000 and (~seen).sum() > 10000
+    assert np.abs(e - ref).max() < 0.05  # float32 projection: a few thousandths of a pixel
+    inside = seen & (uv[:, 0] > 2) & (uv[:, 0] < W - 3) & (uv[:, 1] > 2) & (uv[:, 1] < H - 3)
+    assert (du[~seen] == 0).all() and (dv[~seen] == 0).all()  # unseen or past the fold: no derivative
+    assert np.abs(du[inside]).max() > 0.1 and np.abs(dv[inside]).max() > 0.1
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_lookup_gradient_matches_finite_differences_of_the_weighted_values(name):
+    camera = CAMERAS[name]
+    maps, scene_base, look = lookup_rig(camera)
+    rng = np.random.default_rng(4)
+    p = np.column_stack([rng.uniform(-6, 6, 30_000), rng.uniform(-4, 4, 30_000), rng.uniform(4, 15, 30_000)])
+    R0 = Rotation.from_rotvec([0.02, 0.05, -0.01])
+    t0 = np.array([0.05, 0.02, -0.1])
+    # points well inside the image: the border's one-pixel ramp into the zero padding is hundreds
+    # of times steeper than the maps, and a finite step across its edge would swamp the sum
+    uv, seen = project_points(p @ R0.as_matrix().T + t0, camera)
+    keep = seen & (uv[:, 0] > 10) & (uv[:, 0] < W - 10) & (uv[:, 1] > 10) & (uv[:, 1] < H - 10)
+    p = p[keep].astype(np.float32)
+    assert len(p) > 5000
+    scene = rng.integers(0, 3, len(p))
+    look._base = scene_base(scene)
+    w = rng.uniform(0.2, 1.0, len(p)).astype(np.float32)
+    pts = np.ascontiguousarray(p.T)
+
+    def weighted(delta):
+        R = (Rotation.from_rotvec(delta[3:]) * R0).as_matrix()
+        e = np.empty(len(p), np.float32)
+        look.values(pts, 0, len(p), R.astype(np.float32), (t0 + delta[:3]).astype(np.float32), e)
+        return float(w.astype(np.float64) @ e)
+
+    e, du, dv = (np.empty(len(p), np.float32) for _ in range(3))
+    look.values(pts, 0, len(p), R0.as_matrix().astype(np.float32), t0.astype(np.float32), e, du, dv)
+    g = np.zeros(6)
+    look.gradient(pts, 0, len(p), R0.as_matrix().astype(np.float32), t0.astype(np.float32), w, du, dv, g)
+    steps = np.array([1e-3] * 3 + [1e-4] * 3)
+    numeric = np.array([(weighted(np.eye(6)[k] * steps[k]) - weighted(-np.eye(6)[k] * steps[k])) / (2 * steps[k])
+                        for k in range(6)])
+    assert np.allclose(g, numeric, rtol=1e-3, atol=1e-3 * np.abs(numeric).max())
+
+
+def test_soft_histogram_splits_each_weight_between_two_bins():
+    rng = np.random.default_rng(8)
+    e = rng.uniform(0, 254.999, 50_000).astype(np.float32)
+    offset = (rng.integers(0, 256, e.size) * 256).astype(np.int32)
+    h = soft_histogram(offset, e, 256 * 256)
+    b = e.astype(np.int64)
+    f = e.astype(np.float64) - b
+    ref = np.bincount(offset + b, weights=1 - f, minlength=65537) + np.bincount(offset + b + 1, weights=f, minlength=65537)
+    assert np.allclose(h, ref[:65536], rtol=0, atol=1e-9)
+    assert h.sum() == pytest.approx(e.size)
+
+
+@pytest.mark.parametrize("h_l,h_e", [(0.0, 2.5), (1.3, 0.6), (4.0, 3.3), (40.0, 12.0)])
+def test_separable_smoothing_is_the_kernel_matrices_product(h_l, h_e):
+    x = np.random.default_rng(3).uniform(0, 1, (256, 256))
+    ref = kernel_matrix(h_l) @ x @ kernel_matrix(h_e).T
+    assert np.abs(separable(x, kernel_taps(h_l), kernel_taps(h_e)) - ref).max() < 1e-13
+    row = x[:1]  # one row (a marginal), smoothed along its bins only
+    assert np.abs(separable(row, kernel_taps(0.0), kernel_taps(h_e)) - row @ kernel_matrix(h_e).T).max() < 1e-13
+    A = kernel_matrix(h_l)
+    assert np.array_equal(A, A.T)  # symmetric: the filter is its own adjoint (the MI's gradient)
+    with pytest.raises(ValueError):
+        separable(row, kernel_taps(2.0), kernel_taps(h_e))  # reaches past the one row
 
 
 @pytest.mark.parametrize("dtype", [np.uint16, np.int32, np.int64])

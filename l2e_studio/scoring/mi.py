@@ -11,7 +11,7 @@ widths); weight that would fall past an end bin is reflected back, so no probabi
 That is one separable OpenCV filter with a reflecting border (exactly
 ``scipy.ndimage.gaussian_filter`` on the histogram), or, as a matrix, :func:`kernel_matrix`: a
 symmetric one (the reflection pairs bins both ways), so the gradient in
-:mod:`l2e_studio.objective`, which needs the adjoint, filters too (:func:`smooth_joint`). Since
+:mod:`l2e_studio.objective`, which needs the adjoint, filters too. Since
 smoothing preserves mass and commutes with marginalisation, the smoothed marginals are the sums
 of the smoothed joint.
 """
@@ -83,17 +83,6 @@ def kernel_taps(h: float, dtype: str = "float64") -> np.ndarray:
     out = (w / w.sum()).astype(dtype)
     out.setflags(write=False)
     return out
-
-
-def smooth_joint(joint: np.ndarray, h_l: float, h_e: float) -> np.ndarray:
-    """``kernel_matrix(h_l) @ joint @ kernel_matrix(h_e).T`` for a float64 (256, 256) ``joint``
-    (rows: L bins; or one row, ``h_l`` 0): as a separable filter, a few hundredths of the two dense products' work
-    while the kernels' radius stays under the bin count (reflected more than once, the filter's
-    border and the matrix part ways; then the matrices)."""
-    taps_l, taps_e = kernel_taps(h_l), kernel_taps(h_e)
-    if max(taps_l.size, taps_e.size) // 2 >= N_BINS:
-        return kernel_matrix(h_l, joint.shape[0]) @ joint @ kernel_matrix(h_e).T
-    return cv2.sepFilter2D(joint, cv2.CV_64F, taps_e, taps_l, borderType=cv2.BORDER_REFLECT)
 
 
 def entropy(p: np.ndarray) -> float:
