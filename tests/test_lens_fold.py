@@ -67,7 +67,7 @@ def test_the_objective_reads_nothing_past_the_fold(azimuth):
     at = Extrinsic(np.zeros(3), np.zeros(3))
     obj = stack.objective(at)
     assert obj.stack.n_points == len(P)
-    e, _ = obj._sample(np.zeros(6))
+    e, _ = obj._sample(obj._pose(np.zeros(6)))
     assert (e > 0).all()
     # 18 deg further off axis: 53-61 deg, past the fold (OpenCV: still in the image)
     turn = np.radians(18.0) * (1 if azimuth == 0.0 else -1)
@@ -76,7 +76,7 @@ def test_the_objective_reads_nothing_past_the_fold(azimuth):
     assert np.all(np.degrees(np.arctan2(np.hypot(moved[:, 0], moved[:, 1]), moved[:, 2])) > 52)
     ref, _ = cv2.projectPoints(moved, np.zeros(3), np.zeros(3), WIDE.K, WIDE.D)
     assert in_image(ref.reshape(-1, 2), WIDE).sum() >= 12  # OpenCV: most back in the image, some across it
-    e, (de_du, de_dv) = obj._sample(delta, derivatives=True)
+    e, (de_du, de_dv) = obj._sample(obj._pose(delta), derivatives=True)
     assert (e == 0).all() and (de_du == 0).all() and (de_dv == 0).all()
     assert (obj.value_and_grad(delta)[1] == 0).all()
     assert (stack.pixels(obj.extrinsic(delta)) == -1).all()

@@ -72,7 +72,7 @@ def test_objective_point_set_stays_fixed_when_points_leave_the_image(small_synth
     obj = stack.objective(truth)
     n = obj.stack.n_points
     far = np.array([0.0, 0.0, 0.0, 0.0, np.radians(25.0), 0.0])  # most points now fall off the image
-    e, _ = obj._sample(far)
+    e, _ = obj._sample(obj._pose(far))
     assert e.shape == (n,)
     assert obj.value(far) < obj.value(np.zeros(6))  # pushing points off the image does not pay
 

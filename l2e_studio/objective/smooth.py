@@ -37,9 +37,9 @@ class MapObjective:
     ``base``: the bilinear map lookup and its derivatives, shared by the concrete scores.
 
     ``delta = (dt_x, dt_y, dt_z, dw_x, dw_y, dw_z)``: ``R = exp(dw) R0``, ``t = t0 + dt``.
-    Points are processed in cache-sized chunks on the engine's threads, each chunk in one
-    compiled loop (:class:`l2e_studio.compiled.Lookup`): the values at the points, then, for the
-    gradient, the sum of their derivatives weighted by d score / d value.
+    Points are processed in cache-sized chunks on the engine's threads, each chunk in compiled
+    loops (:class:`l2e_studio.compiled.Lookup`): the values at the points (and the lookup's
+    derivatives), then, for the gradient, their derivatives summed weighted by d score / d value.
     """
 
     def __init__(self, stack: SceneStack, base: Extrinsic, start: Extrinsic | None = None) -> None:
@@ -67,24 +67,27 @@ class MapObjective:
 
     # --- internals -----------------------------------------------------------------------
     def _pose(self, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``R``, ``t`` (float32) at ``base`` corrected by ``delta``."""
         ext = self.extrinsic(np.asarray(delta, dtype=np.float64))
         return ext.R.astype(np.float32), ext.translation.astype(np.float32)
 
-    def _sample(self, delta: np.ndarray, derivatives: bool = False
+    def _sample(self, pose: tuple[np.ndarray, np.ndarray], derivatives: bool = False
                 ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
-        """Bilinear map values e (N,) float32 at the points projected at ``delta`` (at most
-        E_MAX) and, with ``derivatives``, the lookup's (de/du, de/dv) for :meth:`_gradient`."""
-        R, t = self._pose(delta)
+        """Bilinear map values e (N,) float32 at the points projected at ``pose`` (:meth:`_pose`;
+        at most E_MAX) and, with ``derivatives``, the lookup's (de/du, de/dv) for :meth:`_gradient`."""
+        R, t = pose
         n = self.stack.n_points
         e = np.empty(n, dtype=np.float32)
         d = (np.empty(n, dtype=np.float32), np.empty(n, dtype=np.float32)) if derivatives else (None, None)
         run_chunks(lambda a, b: self._lookup.values(self.stack.points, a, b, R, t, e, *d), n)
         return e, d if derivatives else None
 
-    def _gradient(self, delta: np.ndarray, dscore_de: np.ndarray, de_duv: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """Gradient with respect to ``delta`` of a score whose derivative by each point's value
-        is ``dscore_de`` (N,), the lookup's derivatives being ``de_duv`` (:meth:`_sample`'s)."""
-        R, t = self._pose(delta)
+    def _gradient(self, delta: np.ndarray, pose: tuple[np.ndarray, np.ndarray], dscore_de: np.ndarray,
+                  de_duv: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """Gradient with respect to ``delta`` (at ``pose``, its :meth:`_pose`) of a score whose
+        derivative by each point's value is ``dscore_de`` (N,), the lookup's derivatives being
+        ``de_duv`` (:meth:`_sample`'s)."""
+        R, t = pose
         w = dscore_de.astype(np.float32, copy=False)
         n = self.stack.n_points
         parts = np.zeros((-(-n // CHUNK), 6))  # one row per chunk: summed in a fixed order
@@ -106,11 +109,12 @@ class EdgeObjective(MapObjective):
         self._w = (stack.weights / (edges.SCALE * max(total, 1e-12))).astype(np.float32)
 
     def value(self, delta: np.ndarray) -> float:
-        return float(self._w @ (self._sample(delta)[0] - np.float32(edges.OFFSET)))
+        return float(self._w @ (self._sample(self._pose(delta))[0] - np.float32(edges.OFFSET)))
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
-        e, d = self._sample(delta, derivatives=True)
-        return float(self._w @ (e - np.float32(edges.OFFSET))), self._gradient(delta, self._w, d)
+        pose = self._pose(delta)
+        e, d = self._sample(pose, derivatives=True)
+        return float(self._w @ (e - np.float32(edges.OFFSET))), self._gradient(delta, pose, self._w, d)
 
 
 class MIObjective(MapObjective):
@@ -125,22 +129,23 @@ class MIObjective(MapObjective):
         self._l_offset = (stack.l_bins * N_BINS).astype(np.int32)
         hist_l = np.bincount(stack.l_bins, minlength=N_BINS).astype(np.float64)
         self.h_l = silverman_bandwidth(weighted_std(hist_l), stack.n_points)
-        joint = self._soft_histogram(self._sample(self.start)[0])
+        joint = self._soft_histogram(self._sample(self._pose(self.start))[0])
         self.h_e = silverman_bandwidth(weighted_std(joint.sum(axis=0)), stack.n_points)
         self._H_l = entropy(kernel_matrix(self.h_l) @ (hist_l / self.n))
 
     def value(self, delta: np.ndarray) -> float:
         """MI (nats) at ``base`` corrected by ``delta``."""
-        return self._mi_and_weights(self._soft_histogram(self._sample(delta)[0]), need_weights=False)[0]
+        return self._mi_and_weights(self._soft_histogram(self._sample(self._pose(delta))[0]), need_weights=False)[0]
 
     def value_and_grad(self, delta: np.ndarray) -> tuple[float, np.ndarray]:
         """MI and its gradient with respect to ``delta``."""
-        e, d = self._sample(delta, derivatives=True)
+        pose = self._pose(delta)
+        e, d = self._sample(pose, derivatives=True)
         mi, W = self._mi_and_weights(self._soft_histogram(e), need_weights=True)
         # d MI / d e_i: the soft bin moves weight from bin b to bin b + 1 as e grows
         slopes = np.empty_like(e)
         run_chunks(lambda a, b: compiled.bin_slopes(W, self._l_offset[a:b], e[a:b], slopes[a:b]), e.size)
-        return mi, self._gradient(delta, slopes, d)
+        return mi, self._gradient(delta, pose, slopes, d)
 
     def _soft_histogram(self, e: np.ndarray) -> np.ndarray:
         """(256, 256) joint histogram with E linearly split between its two nearest bins."""
