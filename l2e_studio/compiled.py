@@ -68,11 +68,17 @@ def _radtan(x, y, D):
 
 
 @numba.njit(inline="always", **_JIT)
-def _equidistant(x, y, D):
+def _fisheye_angle(x, y, D):
+    """The equidistant model's radius r, squared angle th^2 and distorted angle th_d."""
     r = np.sqrt(x * x + y * y)
     th = np.arctan(r)
     th2 = th * th
-    thd = th * (1 + th2 * (D[0] + th2 * (D[1] + th2 * (D[2] + th2 * D[3]))))
+    return r, th2, th * (1 + th2 * (D[0] + th2 * (D[1] + th2 * (D[2] + th2 * D[3]))))
+
+
+@numba.njit(inline="always", **_JIT)
+def _equidistant(x, y, D):
+    r, _, thd = _fisheye_angle(x, y, D)
     scale = thd / r if r >= 1e-8 else np.float32(1.0)
     return x * scale, y * scale
 
@@ -166,10 +172,7 @@ def _radtan_jacobian(x, y, D):
 
 @numba.njit(inline="always", **_JIT)
 def _equidistant_jacobian(x, y, D):
-    r = np.sqrt(x * x + y * y)
-    th = np.arctan(r)
-    th2 = th * th
-    thd = th * (1 + th2 * (D[0] + th2 * (D[1] + th2 * (D[2] + th2 * D[3]))))
+    r, th2, thd = _fisheye_angle(x, y, D)
     if r < 1e-8:
         return x, y, np.float32(1.0), np.float32(0.0), np.float32(0.0), np.float32(1.0)
     scale = thd / r
