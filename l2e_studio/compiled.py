@@ -16,9 +16,9 @@ projection (vectorised; one loop per lens model, a branch on the model inside ke
 slower), the gather from the maps (scalar and memory-bound: a 400k-point evaluation at full size
 touches 800k cache lines of 150 MB of maps), and for the gradient the projection again with the
 lens's Jacobian, summing the weighted derivatives (cheaper than writing and reading back a 6 x N
-Jacobian). On 40 full-size scenes a final-stage value and gradient went from 32 ms (numpy
-projection, compiled gather) to 16 ms, the 40-scene optimisation with its verdict from 4.5 s to
-2.8-3.0 s (``benchmarks/bench_engine.py``, 2 cores).
+Jacobian). On 40 full-size scenes a final-stage value and gradient went from 49 ms (numpy
+projection, compiled gather) to 14-19 ms, the 40-scene optimisation with its verdict from 3.95 s
+to 2.9-3.2 s (``benchmarks/bench_engine.py``, 2 cores).
 
 Semantics match :func:`l2e_studio.geometry.project_points` and ``in_image``: the camera frame is
 ``R p + t``; points with depth <= ``min_depth``, beyond the lens's fold (``CameraModel.max_r2``) or outside ``[-0.5, W - 0.5) x [-0.5, H - 0.5)``
