@@ -210,6 +210,10 @@ def _camera_point(px, py, pz, i, R, t, K, D, equidistant, r2max, min_depth, jaco
 
 @numba.njit(inline="always", **_JIT)
 def _coordinates_of(px, py, pz, i, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
+    """Point i's clamped lookup coordinates, and whether its value has a derivative along u and v
+    (1) or was clamped to the border or is not seen (0). Its loops (:func:`_coordinates_radtan`,
+    :func:`_coordinates_equidistant`) vectorise, one per lens model: a branch on the model
+    inside kept the loop scalar, 6x slower."""
     _, _, _, _, _, _, u, v, front, _, _, _, _ = _camera_point(px, py, pz, i, R, t, K, D, equidistant, r2max,
                                                               min_depth, False)
     a = u if u >= 0 else np.float32(0.0)  # (NaN, an overflowed projection, too)
@@ -221,16 +225,15 @@ def _coordinates_of(px, py, pz, i, R, t, K, D, equidistant, r2max, min_depth, u_
 
 
 @numba.njit(**_JIT)
-def _lookup_coordinates(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
-    """Loop 1 (one per lens model, so that each vectorises): each point's clamped lookup
-    coordinates, and whether its value has a derivative along u and v (1) or was clamped to the
-    border or is not seen (0)."""
-    if equidistant:
-        for i in range(px.size):
-            _coordinates_of(px, py, pz, i, R, t, K, D, True, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
-    else:
-        for i in range(px.size):
-            _coordinates_of(px, py, pz, i, R, t, K, D, False, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
+def _coordinates_radtan(px, py, pz, R, t, K, D, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
+    for i in range(px.size):
+        _coordinates_of(px, py, pz, i, R, t, K, D, False, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
+
+
+@numba.njit(**_JIT)
+def _coordinates_equidistant(px, py, pz, R, t, K, D, r2max, min_depth, u_max, v_max, uc, vc, ku, kv):
+    for i in range(px.size):
+        _coordinates_of(px, py, pz, i, R, t, K, D, True, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
 
 
 @numba.njit(inline="always", **_JIT)
@@ -247,13 +250,8 @@ def _bilinear_at(maps, base, row, u, v):
 
 
 @numba.njit(**_JIT)
-def _lookup(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, maps, base, row, u_max, v_max, e_max, e,
-            de_du, de_dv, derivatives):
-    n = px.size
-    uc, vc = np.empty(n, np.float32), np.empty(n, np.float32)
-    ku, kv = np.empty(n, np.float32), np.empty(n, np.float32)
-    _lookup_coordinates(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, u_max, v_max, uc, vc, ku, kv)
-    for i in range(n):  # loop 2: the gather (the maps are read once per evaluation: memory-bound)
+def _gather(maps, base, row, uc, vc, ku, kv, e_max, e, de_du, de_dv, derivatives):
+    for i in range(uc.size):
         value, du, dv = _bilinear_at(maps, base[i], row, uc[i], vc[i])
         e[i] = value if value < e_max else e_max
         if derivatives:
@@ -286,12 +284,14 @@ def _weighted_derivatives(px, py, pz, R, t, K, D, equidistant, r2max, min_depth,
 
 
 @numba.njit(**_JIT)
-def _lookup_gradient(px, py, pz, R, t, K, D, equidistant, r2max, min_depth, w, de_du, de_dv, out):
-    # loop 3 (vectorised, one per lens model): the projection again, with the lens's Jacobian
-    if equidistant:
-        g = _weighted_derivatives(px, py, pz, R, t, K, D, True, r2max, min_depth, w, de_du, de_dv)
-    else:
-        g = _weighted_derivatives(px, py, pz, R, t, K, D, False, r2max, min_depth, w, de_du, de_dv)
+def _gradient_radtan(px, py, pz, R, t, K, D, r2max, min_depth, w, de_du, de_dv, out):
+    g = _weighted_derivatives(px, py, pz, R, t, K, D, False, r2max, min_depth, w, de_du, de_dv)
+    out[0], out[1], out[2], out[3], out[4], out[5] = g
+
+
+@numba.njit(**_JIT)
+def _gradient_equidistant(px, py, pz, R, t, K, D, r2max, min_depth, w, de_du, de_dv, out):
+    g = _weighted_derivatives(px, py, pz, R, t, K, D, True, r2max, min_depth, w, de_du, de_dv)
     out[0], out[1], out[2], out[3], out[4], out[5] = g
 
 
@@ -301,6 +301,8 @@ class Lookup:
     maps read there bilinearly, with the lookup's derivatives along u and v (:meth:`values`);
     the derivatives' sum, weighted, with respect to a correction ``(dt, dw)`` of the extrinsic
     (:meth:`gradient`: the projection again, which costs less than writing a 6 x N Jacobian).
+    The projecting loops are compiled per lens model, and only the camera's model is (on first
+    use: compiling both took 4.6 s on this project's machine, once per machine).
 
     ``maps``: the flat zero-padded maps, scene s's pixel (x, y) at ``scene_base + (y + 1) * row
     + x + 1``; coordinates are clamped to ``u_max``, ``v_max`` so the neighbour at +1 exists. A
@@ -314,7 +316,9 @@ class Lookup:
         self._K = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2] + 1.0, K[1, 2] + 1.0], np.float32)
         self._D = np.zeros(8, np.float32)
         self._D[: camera.D.size] = camera.D
-        self._equidistant = camera.model == "equidistant"
+        equidistant = camera.model == "equidistant"
+        self._coordinates = _coordinates_equidistant if equidistant else _coordinates_radtan
+        self._gradient = _gradient_equidistant if equidistant else _gradient_radtan
         self._r2max = np.float32(camera.max_r2)
         self._maps, self._base, self._row = maps, scene_base, np.int64(row)
         self._u_max, self._v_max = np.float32(u_max), np.float32(v_max)
@@ -327,17 +331,18 @@ class Lookup:
         ``de_dv[a:b]`` with the lookup's derivatives."""
         derivatives = de_du is not None and de_dv is not None
         du, dv = (de_du[a:b], de_dv[a:b]) if derivatives else (e[:0], e[:0])
-        _lookup(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._equidistant,
-                self._r2max, self._min_depth, self._maps, self._base[a:b], self._row, self._u_max, self._v_max,
-                self._e_max, e[a:b], du, dv, derivatives)
+        uc, vc, ku, kv = np.empty((4, b - a), np.float32)  # loop 1 (vectorised) -> loop 2 (the gather)
+        self._coordinates(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._r2max,
+                          self._min_depth, self._u_max, self._v_max, uc, vc, ku, kv)
+        _gather(self._maps, self._base[a:b], self._row, uc, vc, ku, kv, self._e_max, e[a:b], du, dv, derivatives)
 
     def gradient(self, points: np.ndarray, a: int, b: int, R: np.ndarray, t: np.ndarray, w: np.ndarray,
                  de_du: np.ndarray, de_dv: np.ndarray, out: np.ndarray) -> None:
         """``out`` (6,) float64 = the sum over points ``a:b`` of ``w[i] (de_du[i] du_i + de_dv[i]
         dv_i)``, ``(du_i, dv_i)`` the derivatives of point i's map coordinates with respect to
         ``(dt, dw)`` (the rotation's part still to be multiplied by the left Jacobian's transpose)."""
-        _lookup_gradient(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._equidistant,
-                         self._r2max, self._min_depth, w[a:b], de_du[a:b], de_dv[a:b], out)
+        self._gradient(points[0, a:b], points[1, a:b], points[2, a:b], R, t, self._K, self._D, self._r2max,
+                       self._min_depth, w[a:b], de_du[a:b], de_dv[a:b], out)
 
 
 @numba.njit(nogil=True, cache=True, boundscheck=False)
