@@ -253,3 +253,17 @@ def test_a_stack_prepares_each_smoothing_once_and_keeps_a_few(small_synth, monke
     whole = stack.subset(np.ones(len(scenes), bool))
     assert whole is not stack and whole.maps is stack.maps and whole.points is stack.points
     assert whole.with_sigma(6.0) is not stack.with_sigma(6.0) and whole._smoothed.keys() == {(6.0, 1.0)}
+
+
+@pytest.mark.parametrize("h_l,h_e", [(3.2, 4.1), (70.0, 2.0)])
+def test_the_mi_smoothing_and_its_adjoint_are_the_kernel_matrices(h_l, h_e):
+    from l2e_studio.objective.smooth import smooth_joint
+    from l2e_studio.scoring.mi import kernel_matrix
+
+    x = np.random.default_rng(6).uniform(0, 1, (256, 256))
+    A_l, A_e = kernel_matrix(h_l), kernel_matrix(h_e)
+    assert np.abs(smooth_joint(x, h_l, h_e) - A_l @ x @ A_e.T).max() < 1e-13
+    # the adjoint (the MI's gradient): the filter itself while the kernels fit (symmetric
+    # matrices); a 70-bin kernel reflects twice, its matrix is not symmetric, the matrices' transpose
+    assert np.abs(smooth_joint(x, h_l, h_e, adjoint=True) - A_l.T @ x @ A_e).max() < 1e-13
+    assert (h_l < 60) == bool(np.array_equal(A_l, A_l.T))

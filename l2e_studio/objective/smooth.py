@@ -161,20 +161,22 @@ class MIObjective(MapObjective):
         mi = self._H_l - float(p_e @ log_e) + float(np.sum(p_le * log_le))
         if not need_weights:
             return mi, None
-        # dH/dp = -(log p + 1) (MI has +H(E), -H(L, E)) taken back through the smoothing: its
-        # kernel matrices are symmetric, so their adjoints are the same filter
-        W = (smooth_joint(log_le + 1.0, self.h_l, self.h_e) - smooth_joint((log_e + 1.0)[None, :], 0.0, self.h_e)) / n
+        # dH/dp = -(log p + 1) (MI has +H(E), -H(L, E)) taken back through the smoothing
+        W = (smooth_joint(log_le + 1.0, self.h_l, self.h_e, adjoint=True)
+             - smooth_joint((log_e + 1.0)[None, :], 0.0, self.h_e, adjoint=True)) / n
         return mi, np.append(W.reshape(-1), 0.0)
 
 
-def smooth_joint(joint: np.ndarray, h_l: float, h_e: float) -> np.ndarray:
-    """``kernel_matrix(h_l) @ joint @ kernel_matrix(h_e).T`` for a float64 (256, 256) ``joint``
-    (rows: L bins; or one row, ``h_l`` 0), as a separable filter
-    (:func:`l2e_studio.compiled.separable`): a tenth of the dense products' work. The matrices
-    where a kernel's radius reaches the far side (reflected twice, the two part ways)."""
+def smooth_joint(joint: np.ndarray, h_l: float, h_e: float, adjoint: bool = False) -> np.ndarray:
+    """``A_l @ joint @ A_e.T`` (``A = kernel_matrix(h)``) for a float64 (256, 256) ``joint``
+    (rows: L bins; or one row, ``h_l`` 0), or with ``adjoint`` ``A_l.T @ joint @ A_e``, as a
+    separable filter (:func:`l2e_studio.compiled.separable`): a tenth of the dense products' work,
+    and its own adjoint, the kernel matrices being symmetric while a kernel's radius stays under
+    the bin count. Past that (reflected twice, under ~30 points) the matrices."""
     taps_l, taps_e = kernel_taps(h_l), kernel_taps(h_e)
     if taps_l.size // 2 >= joint.shape[0] or taps_e.size // 2 >= joint.shape[1]:
-        return kernel_matrix(h_l, joint.shape[0]) @ joint @ kernel_matrix(h_e).T
+        A_l, A_e = kernel_matrix(h_l, joint.shape[0]), kernel_matrix(h_e)
+        return A_l.T @ joint @ A_e if adjoint else A_l @ joint @ A_e.T
     return compiled.separable(joint, taps_l, taps_e)
 
 

@@ -10,8 +10,8 @@ Smoothing spreads each count over its neighbouring bins with Gaussian weights (t
 widths); weight that would fall past an end bin is reflected back, so no probability mass is lost.
 That is one separable OpenCV filter with a reflecting border (exactly
 ``scipy.ndimage.gaussian_filter`` on the histogram), or, as a matrix, :func:`kernel_matrix`: a
-symmetric one (the reflection pairs bins both ways), so the gradient in
-:mod:`l2e_studio.objective`, which needs the adjoint, filters too. Since
+symmetric one while the kernel's radius stays under the bin count (the reflection pairs bins
+both ways), so the gradient in :mod:`l2e_studio.objective`, which needs the adjoint, filters too. Since
 smoothing preserves mass and commutes with marginalisation, the smoothed marginals are the sums
 of the smoothed joint.
 """
