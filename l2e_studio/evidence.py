@@ -140,6 +140,13 @@ def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
     return a, ~a
 
 
+def split(stack: SceneStack, seed: Extrinsic, sigma: float) -> tuple[SceneStack, SceneStack]:
+    """The data's two :func:`halves` (at the smoothing ``sigma``, split at ``seed``) as selections
+    of ``stack``, the stack the run climbed: they climb the stages it prepared, and each is one
+    stack however often the verdict scores it (:meth:`SceneStack.score` remembers)."""
+    return tuple(stack.select(mine) for mine in halves(stack.with_sigma(sigma), seed))
+
+
 def mirrored_start(seed: Extrinsic, result: Extrinsic) -> Extrinsic:
     """The seed mirrored through the result (at least ``MIRROR_DEG`` / ``MIRROR_M`` from it): a
     second start on the far side, so a side peak reached from the seed is unlikely to attract it."""
@@ -201,10 +208,13 @@ def evidence(
     second: tuple[str, Callable[[Extrinsic], float]],
     cancel: threading.Event | None = None,
     steps: Steps | None = None,
+    parts: Callable[[], tuple[SceneStack, SceneStack]] | None = None,
 ) -> tuple[list[Check], Spread]:
     """The checks of ``res`` against ``seed`` on ``stack`` (the stack the run climbed, holding the
     smoothings of its stages), ``second`` being :func:`second_score` of it at the final smoothing,
-    and how far the independent estimates among them landed from ``res``. With
+    and how far the independent estimates among them landed from ``res``. ``parts``: the data's
+    halves when asked, :func:`split` of it (made here when not given; asked beside the second
+    start's climb). With
     ``settings.rotation_only`` the translation is the seed's and only the rotation is tested.
     ``steps``: progress and cancel (:func:`evidence_steps` of them). A second start that settles
     on a side peak clearly below the result passes (:func:`score_share` under ``RIVAL_SHARE``,
@@ -225,7 +235,8 @@ def evidence(
         second_start = pool.submit(refine, stack, *_second_start(seed, res, settings, final.camera),
                                    cancel, lambda p: latest.__setitem__(0, p))
         checks, rot_moved, trans_moved = _checks_beside(stack, seed, res, settings, second, cancel, steps,
-                                                        tag, limit_deg)
+                                                        tag, limit_deg,
+                                                        parts() if parts else split(stack, seed, settings.sigma))
         steps.next("a second start, mirrored through the result")
         while True:  # its progress shown from here on (it may well be done already)
             if latest[0] is not None:
@@ -328,10 +339,11 @@ def probe_budget(max_points: int | None) -> int:
 
 def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings,
                    second: tuple[str, Callable[[Extrinsic], float]], cancel: threading.Event | None, steps: Steps,
-                   tag: str, limit_deg: float) -> tuple[list[Check], list[float], list[float]]:
-    """The checks of :func:`evidence` but the second start: scores, significance, halves (``tag``
-    after each name, halves agreeing within ``limit_deg``); and how far each half refined alone
-    moved the rotation (deg) and the translation (m)."""
+                   tag: str, limit_deg: float, parts: tuple[SceneStack, SceneStack]
+                   ) -> tuple[list[Check], list[float], list[float]]:
+    """The checks of :func:`evidence` but the second start: scores, significance, halves (``parts``;
+    ``tag`` after each name, halves agreeing within ``limit_deg``); and how far each half refined
+    alone moved the rotation (deg) and the translation (m)."""
     rotation_only = settings.rotation_only
     final = stack.with_sigma(settings.sigma)
     checks: list[Check] = []
@@ -352,10 +364,9 @@ def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings:
     steps.next("a significant peak: the score 2-8 deg around the result against its fluctuations")
     checks.append(significance_check(final, res, settings, tag))
 
-    a, b = halves(final, seed)
     rot_moved: list[float] = []
     trans_moved: list[float] = []
-    if a.sum() == 0 or b.sum() == 0:
+    if min(part.n_points for part in parts) == 0:
         checks.append(Check("halves" + tag, False, "too few points to split into two halves"))
     else:
         # each half on its own must prefer the result to the seed, and the result must be a
@@ -374,9 +385,8 @@ def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings:
         coarse = replace(local_settings(settings, final.camera, HALF_BOX_M, from_middle=True), rotation_only=True)
         climb_coarse = final.n_places >= 2 and len(coarse.stages) > 1  # (one stage: the final one, climbed already)
         better, detail = True, []
-        for i, mine in enumerate((a, b)):
+        for i, part in enumerate(parts):  # (each climbs the stages the run prepared, not prepared again)
             steps.next(f"half {i + 1} of 2: refined on its own")
-            part = stack.select(mine)  # it climbs the stages the run prepared, not prepared again
             half = part.with_sigma(settings.sigma)
             h_seed, h_res = half.score(seed, per_scene=False)[0], half.score(res, per_scene=False)[0]
             better &= h_res > h_seed or at_seed

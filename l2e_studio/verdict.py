@@ -41,13 +41,13 @@ import functools
 import threading
 import time
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
 from .calibrate import CalibrationResult, CalibrationSettings, refine
 from .evidence import (RETURN_M, JudgeProgress, JudgingCancelled, Spread, Steps, climbs_back, evidence, evidence_steps,
-                       halves, second_score)
+                       second_score, split)
 from .geometry import Extrinsic
 from .objective import SceneStack
 from .peaks import far_climbs, rival_check
@@ -254,11 +254,11 @@ class Verdict:
 
 
 def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
-           sides: Callable[[], list[SceneStack]]) -> tuple[Extrinsic, bool, str, str]:
+           sides: Sequence[SceneStack]) -> tuple[Extrinsic, bool, str, str]:
     """``handed`` with the seed's rotation, and the seed's translation along the axes outside
     ``seed_axes``, wherever its move from the seed is within SIGNIFICANT x ``spread``.
     Returns (extrinsic, rotation is the seed's, those translation axes, one sentence). A partial
-    mix must still score above the seed on each of ``sides()`` (the data and its halves); else the
+    mix must still score above the seed on each of ``sides`` (the data and its halves); else the
     parts trade against each other and ``handed`` is taken whole if it scores above the seed on
     each (a trusted result does), the seed whole if not."""
     turn = seed.error_to(Extrinsic(handed.rotvec, seed.translation))[0]
@@ -282,10 +282,8 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
                      f"{SIGNIFICANT:g}x the {100 * spread.m:.1f} cm its independent estimates spread)")
     out = Extrinsic(seed.rotvec if keep_rot else handed.rotvec, np.where(keep_t, seed.translation, handed.translation))
 
-    at_seed = functools.cache(lambda: [h.score(seed, per_scene=False)[0] for h in sides()])  # once, if at all
-
     def beats_seed(ext: Extrinsic) -> bool:
-        return all(h.score(ext, per_scene=False)[0] > s for h, s in zip(sides(), at_seed()))
+        return all(h.score(ext, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides)
 
     if (not keep_rot or (mine & ~keep_t).any()) and not beats_seed(out):  # some of the move remains: it alone must beat the seed
         # the parts do not come apart (a turn that made up for a move): the move is taken whole
@@ -392,8 +390,10 @@ def judge(
     final = stack.with_sigma(settings.sigma)
     steps.check()
     second = second_score(final)
-    checks, spread = evidence(stack, seed, res, settings, second, cancel, steps)
-    sides = functools.cache(lambda: [final, *(final.select(m) for m in halves(final, seed))])  # the data, its halves: once
+    # the data's halves, made once (beside the second start's climb) for every check that asks
+    parts = functools.cache(lambda: split(stack, seed, settings.sigma))
+    checks, spread = evidence(stack, seed, res, settings, second, cancel, steps, parts)
+    sides = [final, *(part.with_sigma(settings.sigma) for part in parts())]  # the data and its halves
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
         steps.next("translation probes: the result moved 5 cm along x, y, z")
@@ -405,7 +405,7 @@ def judge(
         returned = np.full(3, np.nan)
         if final.n_places >= 2:  # a broad peak: do the halves of the places climb back to it?
             for k in np.flatnonzero(drops < need):
-                returned[k] = climbs_back(sides()[1:], res, int(k), PROBE_M, settings, cancel, steps.within)
+                returned[k] = climbs_back(sides[1:], res, int(k), PROBE_M, settings, cancel, steps.within)
         axes = translation_axes(drops, final.objective_name, final.n_places, returned, final.n_scenes)
         detail = (f"moving {100 * PROBE_M:.0f} cm along x, y, z lowers the score by "
                   + ", ".join(f"{100 * a.drop:.0f} %" for a in axes) + f" (at least {100 * need:.0f} % each")
@@ -441,11 +441,10 @@ def judge(
         # are the result's (the others the seed's); else all three are the seed's.
         agree = all(c.passed for c in checks if c.name in ("halves agree (translation)", "second start (translation)"))
         pinned = np.array([a.pinned for a in axes]) if agree and axes else np.zeros(3, dtype=bool)
-        stacks = sides()
         for take in ([pinned, np.zeros(3, dtype=bool)] if pinned.any() else [pinned]):
             mixed = Extrinsic(res.rotvec, np.where(take, res.translation, seed.translation))
             if np.array_equal(mixed.matrix, seed.matrix) or all(  # (the optimiser ended at the seed: nothing to prefer)
-                    h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in stacks):
+                    h.score(mixed, per_scene=False)[0] > h.score(seed, per_scene=False)[0] for h in sides):
                 kept = "".join(a for a, t in zip("xyz", take) if not t)
                 return trusted("trusted-rotation", mixed, kept, tuple(checks), spread)
     if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
@@ -459,7 +458,7 @@ def judge(
                        replace(rotation, coarse_to_fine=False, global_search=False, rotation_bound_deg=REFIT_BOUND_DEG),
                        cancel, steps.within)
         refit = Extrinsic(refit.rotvec, seed.translation)
-        rot_checks, rot_spread = evidence(stack, seed, refit, rotation, second, cancel, steps)
+        rot_checks, rot_spread = evidence(stack, seed, refit, rotation, second, cancel, steps, parts)
         rot_failed = [c for c in rot_checks if not c.passed]
         if not rot_failed:
             return trusted("trusted-rotation", refit, "xyz", tuple(checks) + tuple(rot_checks), rot_spread)

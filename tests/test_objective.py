@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from l2e_studio.camera import CameraModel
-from l2e_studio.geometry import project_points
+from l2e_studio.geometry import Extrinsic, project_points
 from l2e_studio.scoring.mi import mutual_information
 from l2e_studio.objective import SceneStack
 from l2e_studio.score_maps import prepare_map, stack_maps
@@ -253,6 +253,39 @@ def test_a_stack_prepares_each_smoothing_once_and_keeps_a_few(small_synth, monke
     whole = stack.subset(np.ones(len(scenes), bool))
     assert whole is not stack and whole.maps is stack.maps and whole.points is stack.points
     assert whole.with_sigma(6.0) is not stack.with_sigma(6.0) and whole._smoothed.keys() == {(6.0, 1.0)}
+
+
+@pytest.mark.parametrize("objective", ["mi", "edges"])
+def test_a_stack_scores_an_extrinsic_once_and_answers_alike(small_synth, objective, monkeypatch):
+    """A run scores its seed and result, and the verdict asks for them again on the data and its
+    halves: the stack remembers, and answers what a fresh computation does, to the last bit."""
+    import l2e_studio.objective.stack as stack_module
+
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0, objective=objective)
+    other = truth.perturbed([0.01, 0.0, -0.02], np.radians([0.3, -0.2, 0.1]))
+    half = np.arange(len(scenes)) % 2 == 0
+    fresh = SceneStack.build(scenes, camera, sigma=2.0, objective=objective)
+    expected = {(id(e), p is None, per): fresh.score(e, per, p) for e in (truth, other) for p in (None, half)
+                for per in (True, False)}
+    computed = []
+    name = "edge_scores" if objective == "edges" else "mi"
+    real = getattr(SceneStack, name)
+    monkeypatch.setattr(SceneStack, name, lambda self, *a: computed.append(a) or real(self, *a))
+    for per in (False, True, True, False):  # a pooled value first: per-scene values are computed once asked
+        for e in (truth, other):
+            for p in (None, half):
+                total, each = stack.score(Extrinsic(e.rotvec.copy(), e.translation.copy()), per, p)
+                want = expected[(id(e), p is None, per)]
+                assert total == want[0]
+                np.testing.assert_array_equal(each, want[1])
+                each[:] = -1.0  # the caller's copy: what the stack remembers stays
+    assert len(computed) == 8  # each extrinsic and mask once pooled, once with the scenes' values
+    assert stack.score(truth)[1].min() > -1.0
+    for k in range(stack_module.SCORES_KEEP + 3):  # bounded: the oldest go first
+        stack.score(truth.perturbed([0.001 * k, 0.0, 0.0], np.zeros(3)), per_scene=False)
+    assert len(stack._scores) == stack_module.SCORES_KEEP
+    assert stack.with_sigma(4.0)._scores == {} and stack.select(stack.scene_of == 0)._scores == {}
 
 
 @pytest.mark.parametrize("h_l,h_e", [(3.2, 4.1), (70.0, 2.0)])

@@ -19,7 +19,7 @@ def stack(small_synth):
 
 
 def sides_of(final, seed):
-    return lambda: [final, *(final.select(m) for m in halves(final, seed))]
+    return [final, *(final.select(m) for m in halves(final, seed))]
 
 
 def test_a_move_beyond_the_spread_is_handed_back_whole(stack):

@@ -34,7 +34,10 @@ from .smooth import MIN_DEPTH, EdgeObjective, MapObjective, MIObjective
 #: How many smoothings of one stack :meth:`SceneStack.with_sigma` keeps (the schedule's three stages,
 #: and one more a caller asks for, e.g. a slider's).
 SMOOTHED_KEEP = 4
-_SMOOTHED_LOCK = threading.Lock()
+_CACHES_LOCK = threading.Lock()  # guards the smoothings and scores each stack keeps
+#: How many scores :meth:`SceneStack.score` remembers per stack: a run scores its seed and result,
+#: and the verdict asks for them again on the data and its halves (each 40 ms on 40 full-size scenes)
+SCORES_KEEP = 16
 #: The edge maps are prepared again when the lidar's axis turns further than this (deg) from the
 #: extrinsic they were prepared for: the gradient then leaks at most sin(3 deg), 5 %, along the lines.
 SCAN_REAIM_DEG = 3.0
@@ -65,6 +68,8 @@ class SceneStack:
     #: the same stages, whose maps are then prepared once (a :meth:`select`ion shares them; stacks
     #: derived otherwise start without)
     _smoothed: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    #: the latest ``SCORES_KEEP`` scores :meth:`score` computed, by extrinsic and pooled scenes
+    _scores: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # --- construction ------------------------------------------------------------------
     @classmethod
@@ -139,7 +144,7 @@ class SceneStack:
         if sigma == self.sigma and scale == self.scale:
             return self
         key = (float(sigma), float(scale))
-        with _SMOOTHED_LOCK:
+        with _CACHES_LOCK:
             hit = self._smoothed.get(key)
         if hit is not None:
             return hit
@@ -147,7 +152,7 @@ class SceneStack:
         camera = full if scale == 1.0 else full.scaled(scale)
         maps = stack_maps(self.raw_maps, self.map_kinds, sigma, (camera.width, camera.height), self.objective_name, self.scan)
         out = replace(self, maps=maps, sigma=float(sigma), scale=float(scale), camera=camera, full_camera=full)
-        with _SMOOTHED_LOCK:  # (two threads asking at once both prepare; either result is the same)
+        with _CACHES_LOCK:  # (two threads asking at once both prepare; either result is the same)
             while len(self._smoothed) >= SMOOTHED_KEEP:  # bounded: the oldest goes (a slider may ask for many)
                 self._smoothed.pop(next(iter(self._smoothed)))
             self._smoothed[key] = out
@@ -195,7 +200,7 @@ class SceneStack:
         out = replace(self, **points)
         # the smoothings this stack prepared serve the selection too (the same maps, its points):
         # a part of the data climbs the stages of a run without preparing them again
-        with _SMOOTHED_LOCK:
+        with _CACHES_LOCK:
             prepared = list(self._smoothed.items())
         out._smoothed.update((key, replace(st, **points)) for key, st in prepared)
         return out
@@ -379,10 +384,22 @@ class SceneStack:
         self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
     ) -> tuple[float, np.ndarray]:
         """The score of the stack's objective at ``extrinsic`` (the paper's MI, or the edge
-        score): (the scenes pooled, per scene)."""
-        if self.objective_name == "edges":
-            return self.edge_scores(extrinsic, per_scene, pooled)
-        return self.mi(extrinsic, per_scene, pooled)
+        score): (the scenes pooled, per scene). Asked again for the same extrinsic and scenes, the
+        same values, not computed again (the latest ``SCORES_KEEP``; the pooled value is the same
+        with or without ``per_scene``: integer counts, or sums, summed alike)."""
+        key = (extrinsic.rotvec.tobytes(), extrinsic.translation.tobytes(),
+               None if pooled is None else np.asarray(pooled, dtype=bool).tobytes())
+        with _CACHES_LOCK:
+            hit = self._scores.get(key)
+        if hit is not None and (hit[1] is not None or not per_scene):
+            return hit[0], hit[1].copy() if per_scene else np.full(self.n_scenes, np.nan)
+        scores = self.edge_scores if self.objective_name == "edges" else self.mi
+        total, per = scores(extrinsic, per_scene, pooled)
+        with _CACHES_LOCK:
+            while len(self._scores) >= SCORES_KEEP:
+                self._scores.pop(next(iter(self._scores)))
+            self._scores[key] = (total, per.copy() if per_scene else None)
+        return total, per
 
     # --- the optimiser's objective -------------------------------------------------------
     def objective(
