@@ -79,7 +79,7 @@ def far_starts(at: Extrinsic) -> tuple[np.ndarray, list[Extrinsic]]:
 def far_field(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:
     """(FAR_SAMPLES,) angles (deg) and scores of :func:`far_starts` of ``at``."""
     angles, starts = far_starts(at)
-    return angles, np.array([stack.score(e, per_scene=False)[0] for e in starts])
+    return angles, stack.scores(starts)
 
 
 def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
@@ -106,8 +106,7 @@ def ranked_far_starts(stack: SceneStack, at: Extrinsic, settings: CalibrationSet
     first = settings.schedule(stack.camera.width, stack.camera.height)[0]
     coarse = stack.with_sigma(first.sigma, first.scale).thinned(FAR_POINTS)
     _, starts = far_starts(at)
-    scores = np.array([coarse.score(e, per_scene=False)[0] for e in starts])
-    return [starts[i] for i in np.argsort(-scores)]
+    return [starts[i] for i in np.argsort(-coarse.scores(starts))]
 
 
 def missed_peak(result: CalibrationResult, end: Extrinsic, score: float) -> bool:

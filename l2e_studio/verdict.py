@@ -357,13 +357,10 @@ def translation_axes(drops: np.ndarray, objective: str, n_places: int,
 def translation_drops(stack: SceneStack, res: Extrinsic, at_res: float) -> np.ndarray:
     """(3,) the share of the score lost by moving ``PROBE_M`` either way along x, y and z (the
     smaller of the two sides): a flat axis loses ~0, a pinned one a good part of its score."""
-    drops = np.zeros(3)
-    for k in range(3):
-        step = np.zeros(3)
-        step[k] = PROBE_M
-        worst = max(stack.score(res.perturbed(sign * step, np.zeros(3)), per_scene=False)[0] for sign in (-1.0, 1.0))
-        drops[k] = (at_res - worst) / abs(at_res) if at_res != 0 else 0.0
-    return drops
+    moved = stack.scores([res.perturbed(sign * PROBE_M * np.eye(3)[k], np.zeros(3)) for k in range(3)
+                          for sign in (-1.0, 1.0)])
+    worst = moved.reshape(3, 2).max(axis=1)
+    return (at_res - worst) / abs(at_res) if at_res != 0 else np.zeros(3)
 
 
 def judge(

@@ -288,6 +288,19 @@ def test_a_stack_scores_an_extrinsic_once_and_answers_alike(small_synth, objecti
     assert stack.with_sigma(4.0)._scores == {} and stack.select(stack.scene_of == 0)._scores == {}
 
 
+@pytest.mark.parametrize("objective", ["mi", "edges"])
+def test_scores_at_many_poses_are_each_poses_score(small_synth, objective):
+    scenes, camera, truth = small_synth
+    stack = SceneStack.build(scenes, camera, sigma=2.0, objective=objective)
+    rng = np.random.default_rng(8)
+    poses = [truth] + [truth.perturbed(rng.normal(0, 0.05, 3), rng.normal(0, 0.05, 3)) for _ in range(6)]
+    got = stack.scores(poses)
+    want = [stack.score(e, per_scene=False)[0] for e in poses]
+    assert got.tolist() == want and len(set(want)) == len(want)
+    assert stack.scores([]).shape == (0,)
+    assert stack.subset([1]).scores(poses[:2]).tolist() == [stack.subset([1]).score(e)[0] for e in poses[:2]]
+
+
 @pytest.mark.parametrize("h_l,h_e", [(3.2, 4.1), (70.0, 2.0)])
 def test_the_mi_smoothing_and_its_adjoint_are_the_kernel_matrices(h_l, h_e):
     from l2e_studio.objective.smooth import smooth_joint

@@ -401,6 +401,41 @@ class SceneStack:
             self._scores[key] = (total, per.copy() if per_scene else None)
         return total, per
 
+    def scores(self, extrinsics: Sequence[Extrinsic]) -> np.ndarray:
+        """(P,) the scenes' pooled :meth:`score` at each of ``extrinsics``, the same values to the
+        last bit, counted scene by scene across all of them at once: a scene's map is read from
+        cache by every pose, where one pose after the other reads every map from memory again
+        (the verdict's 48 far-field poses on 40 full-size scenes thinned to 100k points: 60 ms,
+        160-185 ms one by one; 2 cores)."""
+        P, S = len(extrinsics), self.n_scenes
+        Rs = np.array([e.R for e in extrinsics], np.float32).reshape(P, 3, 3)
+        ts = np.array([e.translation for e in extrinsics], np.float32).reshape(P, 3)
+        starts = np.searchsorted(self.scene_of, np.arange(S + 1))
+        bounds = np.linspace(0, P, min(WORKERS, max(P, 1)) + 1).astype(int)  # the poses, one group per worker
+        groups = [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        if self.objective_name == "edges":
+            if self.weights is None:
+                raise ValueError("this stack was not built for the edges objective")
+            sums = np.zeros((P, S))
+            run_tasks(lambda ab: compiled.edge_sums_at_poses(
+                self.points, self.weights, starts, Rs[ab[0]:ab[1]], ts[ab[0]:ab[1]], self.camera, MIN_DEPTH, self.maps,
+                edges.OFFSET, edges.SCALE, sums[ab[0]:ab[1]]), groups)
+            den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
+            return np.array([float(num.sum() / den.sum()) if S and den.sum() > 0 else float("nan") for num in sums])
+        hists = np.zeros((P, N_BINS * N_BINS), np.int32)
+        e_bins = _e_bins(self.maps)
+        out = np.full(P, np.nan)
+
+        def group(ab: tuple[int, int]) -> None:  # a group of poses counted, then their MI, in one task
+            a, b = ab
+            compiled.count_pairs_at_poses(self.points, self.l_bins, starts, Rs[a:b], ts[a:b], self.camera, MIN_DEPTH,
+                                          e_bins, hists[a:b])
+            if S:
+                out[a:b] = [mi_from_joint_histogram(h.reshape(N_BINS, N_BINS)) for h in hists[a:b]]
+
+        run_tasks(group, groups)
+        return out
+
     # --- the optimiser's objective -------------------------------------------------------
     def objective(
         self, base: Extrinsic, start: Extrinsic | None = None, max_points: int | None = None
