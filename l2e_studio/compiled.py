@@ -124,36 +124,15 @@ def _count_pairs(pix, l_bins, e_bins, hist):
             hist[l_bins[i] * 256 + e_bins[p]] += 1
 
 
-@numba.njit(nogil=True, cache=True, boundscheck=False)
-def _index_at(px, py, pz, R, t, K, D, W, H, min_depth, r2max, equidistant, out):
-    if equidistant:
-        _index_equidistant(px, py, pz, R, t, K, D, W, H, min_depth, r2max, out)
-    else:
-        _index_radtan(px, py, pz, R, t, K, D, W, H, min_depth, r2max, out)
-
-
-@numba.njit(nogil=True, cache=True, boundscheck=False)
-def _count_at_poses(px, py, pz, l_bins, starts, Rs, ts, K, D, W, H, min_depth, r2max, equidistant, e_bins, pix, hists):
-    for s in range(starts.size - 1):  # scene by scene: its map stays in cache while every pose reads it
-        a, b = starts[s], starts[s + 1]
-        for k in range(Rs.shape[0]):
-            _index_at(px[a:b], py[a:b], pz[a:b], Rs[k], ts[k], K, D, W, H, min_depth, r2max, equidistant, pix[:b - a])
-            _count_pairs(pix[:b - a], l_bins[a:b], e_bins[s], hists[k])
-
-
-@numba.njit(nogil=True, cache=True, boundscheck=False)  # (no fastmath: the sums are numpy's bincount's, bit for bit)
-def _edge_sums_at_poses(px, py, pz, weights, starts, Rs, ts, K, D, W, H, min_depth, r2max, equidistant, maps,
-                        offset, scale, pix, sums):
-    for s in range(starts.size - 1):
-        a, b = starts[s], starts[s + 1]
-        for k in range(Rs.shape[0]):
-            _index_at(px[a:b], py[a:b], pz[a:b], Rs[k], ts[k], K, D, W, H, min_depth, r2max, equidistant, pix[:b - a])
-            acc = 0.0
-            for i in range(b - a):
-                p = pix[i]
-                e = maps[s, p // W + 1, p % W + 1] if p >= 0 else maps[s, 0, 0]  # off the image: the border
-                acc += np.float64(weights[a + i]) * (np.float64(e) - offset) / scale
-            sums[k, s] = acc
+@numba.njit(nogil=True, cache=True, boundscheck=False)  # (no fastmath: the sum is numpy's bincount's, bit for bit)
+def _edge_sum(pix, weights, m, offset, scale):
+    W = m.shape[1] - 2
+    acc = 0.0
+    for i in range(pix.size):
+        p = pix[i]
+        e = m[p // W + 1, p % W + 1] if p >= 0 else m[0, 0]  # off the image: the border
+        acc += np.float64(weights[i]) * (np.float64(e) - offset) / scale
+    return acc
 
 
 def _lens(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
@@ -180,15 +159,51 @@ def pixel_index(
     return out
 
 
+def edge_sum(pix: np.ndarray, weights: np.ndarray, padded_map: np.ndarray, offset: float, scale: float) -> float:
+    """The sum over points of ``weight * (e - offset) / scale``, ``e`` the (H+2, W+2) zero-bordered
+    map at each point's pixel ``pix`` (its border where -1, off the image), in float64 in the
+    points' order: what ``np.bincount`` with these weights sums, to the last bit."""
+    return float(_edge_sum(pix, weights, padded_map, float(offset), float(scale)))
+
+
+@numba.njit(inline="always", nogil=True, boundscheck=False)
+def _poses_loop(index, xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights, maps, offset, scale, sums, pix):
+    px, py, pz = xyz
+    K, D, W, H, min_depth, r2max = lens
+    for s in range(starts.size - 1):  # scene by scene: its map stays in cache while every pose reads it
+        a, b = starts[s], starts[s + 1]
+        for k in range(Rs.shape[0]):
+            index(px[a:b], py[a:b], pz[a:b], Rs[k], ts[k], K, D, W, H, min_depth, r2max, pix[:b - a])
+            if hists.shape[0]:  # the MI's pair counts, else the edge score's sums
+                _count_pairs(pix[:b - a], l_bins[a:b], e_bins[s], hists[k])
+            else:
+                sums[k, s] = _edge_sum(pix[:b - a], weights[a:b], maps[s], offset, scale)
+
+
+# one per lens model, chosen in Python, so that only the camera's compiles
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _poses_radtan(xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights, maps, offset, scale, sums, pix):
+    _poses_loop(_index_radtan, xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights, maps, offset, scale, sums, pix)
+
+
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _poses_equidistant(xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights, maps, offset, scale, sums, pix):
+    _poses_loop(_index_equidistant, xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights, maps, offset, scale,
+                sums, pix)
+
+
 def _at_poses(points: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray, camera: CameraModel,
-              min_depth: float) -> tuple:
-    """The arguments the per-pose kernels share, and a scratch buffer of pixel indices."""
+              min_depth: float, l_bins: np.ndarray = np.zeros(0, np.int32),
+              e_bins: np.ndarray = np.zeros((0, 1), np.uint8), hists: np.ndarray = np.zeros((0, 65536), np.int32),
+              weights: np.ndarray = np.zeros(0, np.float32), maps: np.ndarray = np.zeros((0, 3, 3), np.float32),
+              offset: float = 0.0, scale: float = 1.0, sums: np.ndarray = np.zeros((0, 0))) -> None:
+    """:func:`count_pairs_at_poses` (``hists`` given) or :func:`edge_sums_at_poses`, one kernel."""
     K, D = _lens(camera)
-    pix = np.empty(int(np.diff(starts).max(initial=0)), np.int32)
-    return (points[0], points[1], points[2]), (starts.astype(np.int64), np.ascontiguousarray(Rs, np.float32),
-                                               np.ascontiguousarray(ts, np.float32), K, D, camera.width, camera.height,
-                                               np.float32(min_depth), np.float32(camera.max_r2),
-                                               camera.model == "equidistant"), pix
+    lens = (K, D, camera.width, camera.height, np.float32(min_depth), np.float32(camera.max_r2))
+    kernel = _poses_equidistant if camera.model == "equidistant" else _poses_radtan
+    kernel((points[0], points[1], points[2]), lens, starts.astype(np.int64), np.ascontiguousarray(Rs, np.float32),
+           np.ascontiguousarray(ts, np.float32), l_bins, e_bins, hists, weights, maps, float(offset), float(scale),
+           sums, np.empty(int(np.diff(starts).max(initial=0)), np.int32))
 
 
 def count_pairs_at_poses(points: np.ndarray, l_bins: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray,
@@ -197,19 +212,17 @@ def count_pairs_at_poses(points: np.ndarray, l_bins: np.ndarray, starts: np.ndar
     :func:`pixel_index` and :func:`count_pairs` of each scene (points ``starts[s]:starts[s + 1]``
     of the (3, N) float32 ``points``, map bins ``e_bins[s]``) at each pose, the same counts, taken
     scene by scene across all poses so that a scene's map is read from cache by every pose."""
-    xyz, shared, pix = _at_poses(points, starts, Rs, ts, camera, min_depth)
-    _count_at_poses(*xyz, l_bins, *shared, e_bins, pix, hists)
+    _at_poses(points, starts, Rs, ts, camera, min_depth, l_bins=l_bins, e_bins=e_bins, hists=hists)
 
 
 def edge_sums_at_poses(points: np.ndarray, weights: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray,
                        camera: CameraModel, min_depth: float, maps: np.ndarray, offset: float, scale: float,
                        sums: np.ndarray) -> None:
-    """``sums[k, s]``: the sum over scene ``s``'s points of ``weight * (e - offset) / scale`` at
-    pose ``Rs[k], ts[k]``, ``e`` the (S, H+2, W+2) zero-bordered ``maps`` at the point's nearest
-    pixel (the border off the image), in float64 in the points' order (as ``np.bincount`` sums);
-    scene by scene across all poses, as :func:`count_pairs_at_poses`."""
-    xyz, shared, pix = _at_poses(points, starts, Rs, ts, camera, min_depth)
-    _edge_sums_at_poses(*xyz, weights, *shared, maps, float(offset), float(scale), pix, sums)
+    """``sums[k, s]``: :func:`edge_sum` of scene ``s``'s points (``starts[s]:starts[s + 1]``) at
+    pose ``Rs[k], ts[k]`` on its map ``maps[s]`` (S, H+2, W+2), scene by scene across all poses as
+    :func:`count_pairs_at_poses`."""
+    _at_poses(points, starts, Rs, ts, camera, min_depth, weights=weights, maps=maps, offset=offset, scale=scale,
+              sums=sums)
 
 
 def count_pairs(pix: np.ndarray, l_bins: np.ndarray, e_bins: np.ndarray, hist: np.ndarray) -> None:

@@ -24,6 +24,7 @@ How far those independent estimates (the halves, the second start) land from the
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, wait
@@ -171,20 +172,25 @@ def second_score(stack: SceneStack) -> tuple[str, Callable[[Extrinsic], float]]:
 
 def edge_agreement(stack: SceneStack) -> Callable[[Extrinsic], float]:
     """The weighted share of lidar edge points within ``EDGE_RADIUS_PX`` of a Canny edge of
-    their map, as a function of the extrinsic (edges and distance maps computed once)."""
-    weights = stack.weights
-    if weights is None:
-        weights = np.zeros(stack.n_points, dtype=np.float32)
-        for s in range(stack.n_scenes):
-            m = stack.scene_of == s
-            weights[m] = lidar_edge_weights(stack.points[:, m].T, stack.l_bins[m].astype(np.float32))
+    their map, as a function of the extrinsic (edges and distance maps computed once, at the
+    first call: the verdict's, beside its second start's climb)."""
     cam = stack.full_camera or stack.camera
     full = replace(stack, camera=cam)
     radius = EDGE_RADIUS_PX * cam.width / 1280.0
-    distances = [canny_distance(raw) for raw in stack.raw_maps]
-    total = float(weights.sum())
+
+    @functools.cache
+    def prepared() -> tuple[np.ndarray, list[np.ndarray]]:
+        weights = stack.weights
+        if weights is None:
+            weights = np.zeros(stack.n_points, dtype=np.float32)
+            for s in range(stack.n_scenes):
+                m = stack.scene_of == s
+                weights[m] = lidar_edge_weights(stack.points[:, m].T, stack.l_bins[m].astype(np.float32))
+        return weights, [canny_distance(raw) for raw in stack.raw_maps]
 
     def share(ext: Extrinsic) -> float:
+        weights, distances = prepared()
+        total = float(weights.sum())
         pix = full.pixels(ext)  # nearest pixel, -1 off the image
         near = np.zeros(stack.n_points, dtype=bool)
         for s, dist in enumerate(distances):

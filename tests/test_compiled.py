@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from l2e_studio.camera import CameraModel
 from l2e_studio.geometry import in_image, project_points
-from l2e_studio.compiled import (Lookup, count_events, count_pairs, count_pairs_at_poses, e_bins, edge_sums_at_poses,
-                                 pixel_index, separable, soft_histogram)
+from l2e_studio.compiled import (Lookup, count_events, count_pairs, count_pairs_at_poses, e_bins, edge_sum,
+                                 edge_sums_at_poses, pixel_index, separable, soft_histogram)
 from l2e_studio.scoring.mi import kernel_matrix, kernel_taps
 
 K = np.array([[610.0, 0.0, 322.5], [0.0, 612.0, 241.0], [0.0, 0.0, 1.0]])
@@ -84,19 +84,35 @@ def test_count_pairs_is_a_loop_by_loop_count():
     assert hist.sum() == np.count_nonzero(pix >= 0)
 
 
+def test_edge_sum_is_numpys_weighted_bincount_to_the_last_bit():
+    """The edge score's sum at the points' pixels, the border where a point is off the image, in
+    float64 in the points' order: ``np.bincount``'s, bit for bit (the far field's scores must be
+    the score's own)."""
+    rng = np.random.default_rng(5)
+    padded = rng.uniform(0.0, 255.0, (H + 2, W + 2)).astype(np.float32)
+    padded[0, 0] = 128.0 + 7.0  # a border that is not "no edge", so that a wrong read shows
+    pix = rng.integers(-1, W * H, 50_000).astype(np.int32)
+    pix[::7] = -1
+    weights = rng.uniform(0.1, 2.0, pix.size).astype(np.float32)
+    row, col = np.divmod(pix.astype(np.int64), W)
+    e = np.where(pix >= 0, padded[row + 1, col + 1], padded[0, 0]).astype(np.float64)
+    want = np.bincount(np.zeros(pix.size, np.int64), weights=weights * (e - 128.0) / 127.0)[0]
+    assert edge_sum(pix, weights, padded, 128.0, 127.0) == want
+    assert edge_sum(pix[:0], weights[:0], padded, 128.0, 127.0) == 0.0
+
+
 @pytest.mark.parametrize("name", ["rational", "equidistant"])
 def test_counts_and_edge_sums_at_many_poses_are_those_of_one_pose_after_the_other(name):
-    """The far field's poses counted scene by scene: the same pixel for every point at every pose,
-    so the same counts, and the edge sums numpy's ``bincount`` makes, to the last bit."""
+    """The far field's poses, scene by scene: every point at every pose on the pixel
+    :func:`pixel_index` gives, so the counts :func:`count_pairs` makes and the sums of
+    :func:`edge_sum`, to the last bit."""
     camera = CAMERAS[name]
     rng = np.random.default_rng(5)
     pts = np.ascontiguousarray(cloud(30_000).T)
     starts = np.array([0, 7_000, 7_000, 19_000, 30_000])  # four scenes, one without points
-    scene_of = np.repeat(np.arange(4), np.diff(starts)).astype(np.int32)
     l_bins = rng.integers(0, 256, pts.shape[1]).astype(np.int32)
     weights = rng.uniform(0.1, 2.0, pts.shape[1]).astype(np.float32)
     maps = rng.uniform(0.0, 255.0, (4, H + 2, W + 2)).astype(np.float32)
-    maps[:, 0, 0] = 128.0  # the border: "no edge"
     bins = rng.integers(0, 256, (4, W * H)).astype(np.uint8)
     Rs = Rotation.from_rotvec(rng.normal(0.0, 0.05, (5, 3))).as_matrix().astype(np.float32)
     ts = rng.normal(0.0, 0.1, (5, 3)).astype(np.float32)
@@ -105,16 +121,14 @@ def test_counts_and_edge_sums_at_many_poses_are_those_of_one_pose_after_the_othe
     count_pairs_at_poses(pts, l_bins, starts, Rs, ts, camera, MIN_DEPTH, bins, hists)
     edge_sums_at_poses(pts, weights, starts, Rs, ts, camera, MIN_DEPTH, maps, 128.0, 127.0, sums)
     for k in range(5):
-        pix = pixel_index(pts, Rs[k], ts[k], camera, MIN_DEPTH)
-        assert 0.05 < np.mean(pix >= 0) < 0.9
         want = np.zeros(65536, np.int32)
         for s in range(4):
             a, b = starts[s], starts[s + 1]
-            count_pairs(pix[a:b], l_bins[a:b], bins[s], want)
+            pix = pixel_index(pts[:, a:b], Rs[k], ts[k], camera, MIN_DEPTH)
+            assert b == a or 0.05 < np.mean(pix >= 0) < 0.9
+            count_pairs(pix, l_bins[a:b], bins[s], want)
+            assert sums[k, s] == edge_sum(pix, weights[a:b], maps[s], 128.0, 127.0)
         np.testing.assert_array_equal(hists[k], want)
-        row, col = np.divmod(pix.astype(np.int64), W)
-        e = np.where(pix >= 0, maps[scene_of, row + 1, col + 1], maps[scene_of, 0, 0]).astype(np.float64)
-        np.testing.assert_array_equal(sums[k], np.bincount(scene_of, weights=weights * (e - 128.0) / 127.0, minlength=4))
 
 
 def test_e_bins_are_the_nearest_bins_of_the_padded_map():

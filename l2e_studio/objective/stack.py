@@ -13,7 +13,7 @@ from __future__ import annotations
 import threading
 import weakref
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Callable, Sequence
 
 import numpy as np
@@ -354,10 +354,11 @@ class SceneStack:
         function of the extrinsic (the verdict's second score for event maps). The maps' E bins
         are taken once from the raw maps, clipped as :func:`stack_maps` clips them: the same
         values as :meth:`mi` of ``with_sigma(0.0)``, without preparing that stack's float maps
-        (150 MB for 40 full-size scenes, a sixth of a verdict's work on them)."""
+        (150 MB for 40 full-size scenes, a sixth of a verdict's work on them). The bins are taken
+        at the first call (the verdict's, beside its second start's climb)."""
         full = self if self.scale == 1.0 else replace(self, camera=self.full_camera, scale=1.0)
-        bins = _raw_e_bins(self.raw_maps, self.map_kinds)
-        return lambda ext: mi_from_joint_histogram(full._pooled_joint(ext, e_bins=bins).reshape(N_BINS, N_BINS))
+        bins = cache(lambda: _raw_e_bins(self.raw_maps, self.map_kinds))
+        return lambda ext: mi_from_joint_histogram(full._pooled_joint(ext, e_bins=bins()).reshape(N_BINS, N_BINS))
 
     # --- the stack's own score (what the optimiser climbs, in its reporting form) -------------
     def edge_scores(
@@ -403,9 +404,9 @@ class SceneStack:
 
     def scores(self, extrinsics: Sequence[Extrinsic]) -> np.ndarray:
         """(P,) the scenes' pooled :meth:`score` at each of ``extrinsics``, the same values to the
-        last bit, counted scene by scene across all of them at once: a scene's map is read from
-        cache by every pose, where one pose after the other reads every map from memory again
-        (the verdict's 48 far-field poses on 40 full-size scenes thinned to 100k points: 60 ms,
+        last bit, counted scene by scene across all of them: a scene's map is read from cache by
+        every pose, where one pose after the other reads every map from memory again (the
+        verdict's 48 far-field poses on 40 full-size scenes thinned to 100k points: 60 ms,
         160-185 ms one by one; 2 cores)."""
         P, S = len(extrinsics), self.n_scenes
         Rs = np.array([e.R for e in extrinsics], np.float32).reshape(P, 3, 3)
@@ -413,6 +414,7 @@ class SceneStack:
         starts = np.searchsorted(self.scene_of, np.arange(S + 1))
         bounds = np.linspace(0, P, min(WORKERS, max(P, 1)) + 1).astype(int)  # the poses, one group per worker
         groups = [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        out = np.full(P, np.nan)
         if self.objective_name == "edges":
             if self.weights is None:
                 raise ValueError("this stack was not built for the edges objective")
@@ -421,10 +423,10 @@ class SceneStack:
                 self.points, self.weights, starts, Rs[ab[0]:ab[1]], ts[ab[0]:ab[1]], self.camera, MIN_DEPTH, self.maps,
                 edges.OFFSET, edges.SCALE, sums[ab[0]:ab[1]]), groups)
             den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
-            return np.array([float(num.sum() / den.sum()) if S and den.sum() > 0 else float("nan") for num in sums])
+            out[:] = [float(num.sum() / den.sum()) if S and den.sum() > 0 else float("nan") for num in sums]
+            return out
         hists = np.zeros((P, N_BINS * N_BINS), np.int32)
         e_bins = _e_bins(self.maps)
-        out = np.full(P, np.nan)
 
         def group(ab: tuple[int, int]) -> None:  # a group of poses counted, then their MI, in one task
             a, b = ab
