@@ -17,6 +17,7 @@ Used by :func:`l2e_studio.verdict.judge`; the layering puts this module beside i
 from __future__ import annotations
 
 import threading
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import replace
 from typing import Callable, Sequence
 
@@ -25,7 +26,8 @@ import numpy as np
 from .calibrate import CalibrationResult, CalibrationSettings, Progress, refine
 from .verdict_check import Check
 from .geometry import Extrinsic
-from .objective import SceneStack
+from .objective import SceneStack, single_threaded_blas
+from .pool import WORKERS
 
 FAR_DEG = (2.0, 8.0)  # the far field of a peak: random rotations this far from it (deg) ...
 FAR_SAMPLES = 48  # ... this many of them (a fixed pattern, so a verdict is repeatable) ...
@@ -41,6 +43,8 @@ FAR_CLIMBS = 10
 #: on a rugged landscape (on OpenCalib's single-scan rig a result 0.26 deg from the reference has
 #: a far climb end at 92 % of it, the 6th), while a higher end is an answer at any count.
 RIVAL_CLIMBS = 3
+#: how many far climbs run at once (one while the engine has one thread, ``L2E_THREADS=1``)
+CLIMBERS = min(2, WORKERS)
 #: another end further from the result than two answers may differ and still agree (the
 #: verdict's ``AGREE_MAX_DEG``) ...
 RIVAL_DEG = 0.6
@@ -119,23 +123,42 @@ def far_climbs(stack: SceneStack, result: CalibrationResult, settings: Calibrati
                cancel: threading.Event | None = None, on_progress: Callable[[Progress], None] | None = None,
                ) -> tuple[tuple[Extrinsic, float], ...]:
     """``(end, final score)`` of local climbs at the final smoothing from the first ``FAR_CLIMBS``
-    of :func:`ranked_far_starts` around the result, best first; they stop at the first
-    :func:`missed_peak` (:func:`rival_check` has its answer). ``on_progress`` sees one fraction
-    across all the climbs. The climbs skip the coarse stages: their blur would pull a start near
+    of :func:`ranked_far_starts` around the result, best first (``CLIMBERS`` climb at once, and
+    the ends are taken in that order); they stop at the first :func:`missed_peak`
+    (:func:`rival_check` has its answer). ``on_progress`` sees one fraction across all the
+    climbs, from the calling thread. The climbs skip the coarse stages: their blur would pull a start near
     another peak back into the result's wide basin (on KITTI 000008 a start 1.2 deg from the
     reference went back to a side peak 4.6 deg off). ``stack`` at the final smoothing (the
     verdict's) is used as it is, not prepared again."""
     final = stack.with_sigma(settings.sigma)  # ``stack`` itself when it is at the final smoothing
     local = replace(settings, global_search=False, coarse_to_fine=False)  # one stage: the final smoothing
-    ends = []
-    for k, start in enumerate(ranked_far_starts(stack, result.extrinsic, settings)[:FAR_CLIMBS]):
-        # one progress bar across all climbs, not one per climb
-        progress = None if on_progress is None else (
-            lambda p, k=k: on_progress(replace(p, fraction=(k + p.fraction) / FAR_CLIMBS)))
-        end = refine(final, start, local, cancel, progress)
-        ends.append((end, float(final.score(end, per_scene=False)[0])))
-        if missed_peak(result, *ends[-1]):
-            break
+    starts = ranked_far_starts(stack, result.extrinsic, settings)[:FAR_CLIMBS]
+    fractions = [0.0] * len(starts)  # each climb's progress, written by its thread ...
+    latest: list[Progress | None] = [None]
+
+    def climb(k: int) -> tuple[Extrinsic, float]:
+        def seen(p: Progress) -> None:
+            fractions[k], latest[0] = p.fraction, p
+
+        end = refine(final, starts[k], local, cancel, seen)
+        fractions[k] = 1.0
+        return end, float(final.score(end, per_scene=False)[0])
+
+    # CLIMBERS at once (each climb's evaluations leave a share of the cores idle: on KITTI
+    # odometry's 10 scans ten climbs took 1.6-1.8 s one after the other, 1.0-1.1 s two at a time,
+    # the same ends); taken in rank order, up to the first missed peak, as one after the other
+    ends: list[tuple[Extrinsic, float]] = []
+    with single_threaded_blas(), ThreadPoolExecutor(CLIMBERS, thread_name_prefix="l2e-far-climb") as pool:
+        futures = [pool.submit(climb, k) for k in range(len(starts))]
+        for future in futures:
+            while not wait([future], timeout=0.05).done:  # ... and reported from here, one bar across all
+                if on_progress is not None and latest[0] is not None:
+                    on_progress(replace(latest[0], fraction=sum(fractions) / FAR_CLIMBS))
+            ends.append(future.result())
+            if missed_peak(result, *ends[-1]):
+                for rest in futures:  # (those not begun; one begun runs to its end)
+                    rest.cancel()
+                break
     return tuple(ends)
 
 
