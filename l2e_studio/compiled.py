@@ -192,18 +192,22 @@ def _poses_equidistant(xyz, lens, starts, Rs, ts, l_bins, e_bins, hists, weights
                 sums, pix)
 
 
+#: what the per-pose kernel is given for the half of its work not asked for (zero-length, typed alike)
+_NO_PAIRS = (np.zeros(0, np.int32), np.zeros((0, 1), np.uint8), np.zeros((0, 65536), np.int32))
+_NO_SUMS = (np.zeros(0, np.float32), np.zeros((0, 3, 3), np.float32), 0.0, 1.0, np.zeros((0, 0)))
+
+
 def _at_poses(points: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray, camera: CameraModel,
-              min_depth: float, l_bins: np.ndarray = np.zeros(0, np.int32),
-              e_bins: np.ndarray = np.zeros((0, 1), np.uint8), hists: np.ndarray = np.zeros((0, 65536), np.int32),
-              weights: np.ndarray = np.zeros(0, np.float32), maps: np.ndarray = np.zeros((0, 3, 3), np.float32),
-              offset: float = 0.0, scale: float = 1.0, sums: np.ndarray = np.zeros((0, 0))) -> None:
-    """:func:`count_pairs_at_poses` (``hists`` given) or :func:`edge_sums_at_poses`, one kernel."""
+              min_depth: float, pairs: tuple, sums: tuple) -> None:
+    """:func:`count_pairs_at_poses` (``pairs``: l_bins, e_bins, hists) or :func:`edge_sums_at_poses`
+    (``sums``: weights, maps, offset, scale, sums), the other ``_NO_*``: one kernel per lens model."""
     K, D = _lens(camera)
     lens = (K, D, camera.width, camera.height, np.float32(min_depth), np.float32(camera.max_r2))
     kernel = _poses_equidistant if camera.model == "equidistant" else _poses_radtan
+    weights, maps, offset, scale, out = sums
     kernel((points[0], points[1], points[2]), lens, starts.astype(np.int64), np.ascontiguousarray(Rs, np.float32),
-           np.ascontiguousarray(ts, np.float32), l_bins, e_bins, hists, weights, maps, float(offset), float(scale),
-           sums, np.empty(int(np.diff(starts).max(initial=0)), np.int32))
+           np.ascontiguousarray(ts, np.float32), *pairs, weights, maps, float(offset), float(scale), out,
+           np.empty(int(np.diff(starts).max(initial=0)), np.int32))
 
 
 def count_pairs_at_poses(points: np.ndarray, l_bins: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray,
@@ -212,7 +216,7 @@ def count_pairs_at_poses(points: np.ndarray, l_bins: np.ndarray, starts: np.ndar
     :func:`pixel_index` and :func:`count_pairs` of each scene (points ``starts[s]:starts[s + 1]``
     of the (3, N) float32 ``points``, map bins ``e_bins[s]``) at each pose, the same counts, taken
     scene by scene across all poses so that a scene's map is read from cache by every pose."""
-    _at_poses(points, starts, Rs, ts, camera, min_depth, l_bins=l_bins, e_bins=e_bins, hists=hists)
+    _at_poses(points, starts, Rs, ts, camera, min_depth, (l_bins, e_bins, hists), _NO_SUMS)
 
 
 def edge_sums_at_poses(points: np.ndarray, weights: np.ndarray, starts: np.ndarray, Rs: np.ndarray, ts: np.ndarray,
@@ -221,8 +225,7 @@ def edge_sums_at_poses(points: np.ndarray, weights: np.ndarray, starts: np.ndarr
     """``sums[k, s]``: :func:`edge_sum` of scene ``s``'s points (``starts[s]:starts[s + 1]``) at
     pose ``Rs[k], ts[k]`` on its map ``maps[s]`` (S, H+2, W+2), scene by scene across all poses as
     :func:`count_pairs_at_poses`."""
-    _at_poses(points, starts, Rs, ts, camera, min_depth, weights=weights, maps=maps, offset=offset, scale=scale,
-              sums=sums)
+    _at_poses(points, starts, Rs, ts, camera, min_depth, _NO_PAIRS, (weights, maps, offset, scale, sums))
 
 
 def count_pairs(pix: np.ndarray, l_bins: np.ndarray, e_bins: np.ndarray, hist: np.ndarray) -> None:
