@@ -9,9 +9,10 @@ and the workbench's readout does it on each key press. As numpy expressions, pro
 lens distortion is some twenty passes over the points, each a temporary the size of the cloud;
 one fused loop keeps each point in registers and lets the compiler vectorise it (only where no
 branch is left in it: the pixel index's test of the lens's fold as a branch kept it scalar). The
-pixel index of 3M points on one core of this host (AMD EPYC): 12-15 ms for a pinhole or
-radtan lens, 50-56 ms for a fisheye (its arctan stays scalar), 30-105 ms with that branch. The bilinear lookup reads the float32
-maps where numpy needed a packed copy of 40 full-size maps (300 MB, 0.4-0.8 s per stage).
+pixel index of 3M points on one core of this host (AMD EPYC): 12-15 ms for a pinhole or radtan
+lens, 50-56 ms for a fisheye (its arctan stays scalar), 30-105 ms with that branch. The bilinear
+lookup reads the float32 maps where numpy needed a packed copy of 40 full-size maps (300 MB,
+0.4-0.8 s per stage).
 
 The smooth objectives' evaluation (:class:`Lookup`) is three loops per chunk of points: the
 projection (vectorised; one loop per lens model, a branch on the model inside kept it scalar, 6x
@@ -135,9 +136,11 @@ def _edge_sum(pix, weights, m, offset, scale):
     return acc
 
 
-def _lens(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """The camera's intrinsics (fx, fy, skew, cx, cy) and its 8 distortion coefficients, float32."""
-    K = np.array([camera.K[0, 0], camera.K[1, 1], camera.K[0, 1], camera.K[0, 2], camera.K[1, 2]], np.float32)
+def _lens(camera: CameraModel, shift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's intrinsics (fx, fy, skew, cx + shift, cy + shift) and its 8 distortion
+    coefficients, float32."""
+    K = camera.K
+    K = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2] + shift, K[1, 2] + shift], np.float32)
     D = np.zeros(8, np.float32)
     D[: camera.D.size] = camera.D
     return K, D
@@ -401,11 +404,7 @@ class Lookup:
 
     def __init__(self, camera: CameraModel, maps: np.ndarray, scene_base: np.ndarray, row: int,
                  u_max: float, v_max: float, min_depth: float, e_max: float) -> None:
-        K = camera.K
-        # (+1: the one-pixel padding)
-        self._K = np.array([K[0, 0], K[1, 1], K[0, 1], K[0, 2] + 1.0, K[1, 2] + 1.0], np.float32)
-        self._D = np.zeros(8, np.float32)
-        self._D[: camera.D.size] = camera.D
+        self._K, self._D = _lens(camera, 1.0)  # (+1: the one-pixel padding)
         equidistant = camera.model == "equidistant"
         self._coordinates = _coordinates_equidistant if equidistant else _coordinates_radtan
         self._gradient = _gradient_equidistant if equidistant else _gradient_radtan

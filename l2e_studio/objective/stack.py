@@ -368,18 +368,19 @@ class SceneStack:
         "no edge"): (the scenes pooled, per scene), as :meth:`mi` returns them."""
         if self.weights is None:
             raise ValueError("this stack was not built for the edges objective")
-        pix = self.pixels(extrinsic).astype(np.int64)
-        S, Hp, Wp = self.maps.shape
-        row, col = np.divmod(pix, Wp - 2)
-        flat = np.where(pix >= 0, (self.scene_of * Hp + row + 1) * Wp + col + 1, self.scene_of * Hp * Wp)
-        e = self.maps.reshape(-1)[flat].astype(np.float64)  # off the image: the border, "no edge"
-        contrib = self.weights * (e - edges.OFFSET) / edges.SCALE
-        num = np.bincount(self.scene_of, weights=contrib, minlength=S)
+        pix = self.pixels(extrinsic)
+        S = self.n_scenes
+        starts = np.searchsorted(self.scene_of, np.arange(S + 1))
+        num = np.zeros(S)
+
+        def scene(s: int) -> None:
+            a, b = starts[s], starts[s + 1]
+            num[s] = compiled.edge_sum(pix[a:b], self.weights[a:b], self.maps[s], edges.OFFSET, edges.SCALE)
+
+        run_tasks(scene, range(S))
         den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
-        mask = np.ones(S, dtype=bool) if pooled is None else np.asarray(pooled, dtype=bool)
-        total = float(num[mask].sum() / den[mask].sum()) if mask.any() and den[mask].sum() > 0 else float("nan")
         per = np.where(den > 0, num / np.maximum(den, 1e-12), np.nan) if per_scene else np.full(S, np.nan)
-        return total, per
+        return _pooled_edges(num, den, pooled), per
 
     def score(
         self, extrinsic: Extrinsic, per_scene: bool = True, pooled: np.ndarray | None = None
@@ -423,7 +424,7 @@ class SceneStack:
                 self.points, self.weights, starts, Rs[ab[0]:ab[1]], ts[ab[0]:ab[1]], self.camera, MIN_DEPTH, self.maps,
                 edges.OFFSET, edges.SCALE, sums[ab[0]:ab[1]]), groups)
             den = np.bincount(self.scene_of, weights=self.weights, minlength=S)
-            out[:] = [float(num.sum() / den.sum()) if S and den.sum() > 0 else float("nan") for num in sums]
+            out[:] = [_pooled_edges(num, den) for num in sums]
             return out
         hists = np.zeros((P, N_BINS * N_BINS), np.int32)
         e_bins = _e_bins(self.maps)
@@ -463,6 +464,13 @@ def evenly(indices: np.ndarray, max_points: int | None) -> np.ndarray:
     if max_points is None or indices.size <= max_points:
         return indices
     return indices[:: -(-indices.size // max_points)]
+
+
+def _pooled_edges(num: np.ndarray, den: np.ndarray, pooled: np.ndarray | None = None) -> float:
+    """The edge score of the scenes ``pooled`` (default all) from their weighted sums ``num`` and
+    weights ``den`` (nan where none is picked or none has weight)."""
+    mask = np.ones(num.size, dtype=bool) if pooled is None else np.asarray(pooled, dtype=bool)
+    return float(num[mask].sum() / den[mask].sum()) if mask.any() and den[mask].sum() > 0 else float("nan")
 
 
 def _e_bins(maps: np.ndarray) -> np.ndarray:
