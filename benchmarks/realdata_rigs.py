@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from l2e_studio.camera import CameraModel
@@ -92,6 +93,62 @@ def split(rigs: list[Rig], k: int = 1) -> list[Rig]:
     return [Rig(f"{r.name}/{r.scenes[i].name}" + (f"+{k - 1}" if k > 1 else ""), r.camera, r.reference,
                 r.scenes[i:i + k], r.board)
             for r in rigs for i in range(0, len(r.scenes) - k + 1, k)]
+
+
+def ring_elevations(points: np.ndarray, bin_deg: float = 0.02, min_range_m: float = 5.0,
+                    min_gap_deg: float = 0.25) -> np.ndarray:
+    """The elevations (deg, descending) of a spinning lidar's rings: the peaks, at least
+    ``min_gap_deg`` apart, of the histogram of its points' elevations beyond ``min_range_m``
+    (nearer, the lasers' offsets on the head blur the rings as seen from the origin)."""
+    from scipy.signal import find_peaks
+
+    P = np.asarray(points, dtype=np.float64)
+    r = np.linalg.norm(P, axis=1)
+    far = r > min_range_m
+    el = np.degrees(np.arcsin(np.clip(P[far, 2] / r[far], -1.0, 1.0)))
+    edges = np.arange(el.min() - bin_deg, el.max() + 2 * bin_deg, bin_deg)
+    h = np.histogram(el, edges)[0].astype(float)
+    peaks, _ = find_peaks(h, distance=max(int(min_gap_deg / bin_deg), 1), prominence=0.1 * h.max())
+    return np.sort(edges[peaks] + bin_deg / 2)[::-1]
+
+
+def sparse(rigs: list[Rig], spacing_deg: float) -> list[Rig]:
+    """Each rig's scans with only the rings at least ``spacing_deg`` apart (from the top ring
+    down; each kept ring's points within half the gap to its nearest neighbouring ring): a
+    64-beam drive seen as a 16-beam lidar would see it (``<rig>~<spacing>deg``), the same camera,
+    images and reference. Whether a sparse lidar fails for its rings or for its rigs' static
+    scenes can then be told apart."""
+    out = []
+    for rig in rigs:
+        rings = ring_elevations(rig.scenes[0].points)
+        kept = [rings[0]]
+        for e in rings[1:]:
+            if kept[-1] - e >= spacing_deg - 1e-6:
+                kept.append(e)
+        gaps = np.abs(np.diff(rings))
+        half = 0.5 * float(np.median(gaps))  # the scan's own ring gap bounds how far a ring spreads
+        scenes = []
+        for sc in rig.scenes:
+            P = np.asarray(sc.points, dtype=np.float64)
+            r = np.linalg.norm(P, axis=1)
+            el = np.degrees(np.arcsin(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)))
+            keep = np.min(np.abs(el[:, None] - np.asarray(kept)[None, :]), axis=1) < half
+            scenes.append(replace(sc, points=sc.points[keep], intensity=sc.intensity[keep]))
+        out.append(Rig(f"{rig.name}~{spacing_deg:g}deg", rig.camera, rig.reference, tuple(scenes), rig.board))
+    return out
+
+
+def resized(rigs: list[Rig], width: int) -> list[Rig]:
+    """Each rig's images (and camera) resized to ``width`` pixels across (``<rig>@<width>px``): a
+    drive seen by a camera as small as a DAVIS346 (346 x 260), the scans and reference the same."""
+    out = []
+    for rig in rigs:
+        factor = width / rig.camera.width
+        camera = rig.camera.scaled(factor)
+        scenes = tuple(replace(sc, event_map=cv2.resize(sc.event_map, (camera.width, camera.height),
+                                                        interpolation=cv2.INTER_AREA)) for sc in rig.scenes)
+        out.append(Rig(f"{rig.name}@{width}px", camera, rig.reference, scenes, rig.board))
+    return out
 
 
 def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
