@@ -109,16 +109,25 @@ ROTATION_ADVICE = {
 #: A lidar whose scan lines sit this far apart (deg) or more is sparse for a targetless rotation:
 #: a VLP-16 (2 deg) on every 16-beam dev rig, where the default score had a rotation trusted in 1
 #: of 240 runs from seeds 1-5 deg off; not the OpenCalib and KITTI lidars (0.34-0.36 deg) nor an
-#: HDL-32E (1.33 deg), which calibrates on the synthetic rigs.
+#: HDL-32E (1.33 deg), which calibrates on the synthetic rigs. Every one of those 16-beam rigs is
+#: static (its scenes one place); KITTI's drive (ten places) thinned to rings 2 deg apart has its
+#: rotation trusted within 0.2 deg (benchmarks/results/realdata.md, stop 40), so where the scenes
+#: show one place the advice asks for places first.
 SPARSE_SCAN_DEG = 1.5
 
 
-def sparse_scan_line(deg: float, px: float) -> str:
-    """The rotation's advice for a lidar whose scan lines are ``deg`` apart (``px`` at the image's centre)."""
-    return (f"rotation: the lidar's scan lines are {deg:.1f} deg apart ({px:.0f} px at the image's centre); "
+def sparse_scan_line(deg: float, px: float, one_place: bool = False) -> str:
+    """The rotation's advice for a lidar whose scan lines are ``deg`` apart (``px`` at the image's
+    centre); ``one_place``: every scene shows one place (:mod:`l2e_studio.places`)."""
+    line = (f"rotation: the lidar's scan lines are {deg:.1f} deg apart ({px:.0f} px at the image's centre); "
             "structure that runs along them is placed no finer than that, so the score rests on the little that "
-            "crosses them. A checkerboard held at several places and tilts pins the rotation from a scan this "
-            "sparse (the Target tab, or calibrate --target)")
+            "crosses them")
+    if one_place:
+        return (line + ", and all these scenes show one place. Record scenes of many places (drive or carry the rig "
+                "past varied structure), or hold a checkerboard at several places and tilts (the Target tab, or "
+                "calibrate --target)")
+    return (line + ". A checkerboard held at several places and tilts pins the rotation from a scan this sparse "
+            "(the Target tab, or calibrate --target)")
 
 
 @dataclass(frozen=True)
@@ -145,6 +154,8 @@ class Verdict:
     #: how far apart the lidar's scan lines are, in deg and in px at the image's centre (measured
     #: only where the rotation is not trusted; nan otherwise): :func:`scan_line_spacing`
     scan_lines: tuple[float, float] = (float("nan"), float("nan"))
+    #: how many places the scenes show (:mod:`l2e_studio.places`; 0: not counted)
+    places: int = 0
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -214,7 +225,7 @@ class Verdict:
             if text is not None and f"rotation: {text}" not in out:
                 out.append(f"rotation: {text}")
         if self.scan_lines[0] >= SPARSE_SCAN_DEG:
-            out.append(sparse_scan_line(*self.scan_lines))
+            out.append(sparse_scan_line(*self.scan_lines, one_place=self.places == 1))
         return out
 
     def advice(self) -> list[str]:
@@ -426,7 +437,8 @@ def judge(
     def trusted(status: str, handed: Extrinsic, seed_axes: str, all_checks: tuple[Check, ...], spread: Spread) -> Verdict:
         out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides)
         return Verdict(status, out, False, reasons if status != "trusted" else (), all_checks,
-                       time.perf_counter() - t0, axes, seed_axes, spread, seed_rot, settled_axes, settled)
+                       time.perf_counter() - t0, axes, seed_axes, spread, seed_rot, settled_axes, settled,
+                       places=final.n_places)
 
     if not failed:
         return trusted("trusted", res, "", tuple(checks), spread)
@@ -464,7 +476,7 @@ def judge(
     steps.check()
     keep = on_untrusted == "keep-seed"
     return Verdict("not-trusted", seed if keep else res, keep, reasons, tuple(checks), time.perf_counter() - t0, axes,
-                   spread=spread, scan_lines=scan_line_spacing(final, res))
+                   spread=spread, scan_lines=scan_line_spacing(final, res), places=final.n_places)
 
 
 def scan_line_spacing(stack: SceneStack, at: Extrinsic) -> tuple[float, float]:

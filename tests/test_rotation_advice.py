@@ -86,7 +86,9 @@ def test_a_pulled_result_on_a_real_16_beam_rig_says_what_failed_and_what_to_do()
     assert v.to_dict()["rotation_advice"] == advice
     # the family lines, then the lidar's own: a VLP-16's scan lines are 2 deg apart
     from l2e_studio.verdict import sparse_scan_line
-    assert v.scan_lines[0] == pytest.approx(2.0, abs=0.05) and advice[-1] == sparse_scan_line(*v.scan_lines)
+    # (its eight scenes show one street from one place: the line asks for places before the board)
+    assert v.places == 1 and v.scan_lines[0] == pytest.approx(2.0, abs=0.05)
+    assert advice[-1] == sparse_scan_line(*v.scan_lines, one_place=True)
     assert v.to_dict()["scan_line_spacing"]["deg"] == pytest.approx(2.0, abs=0.05)
 
 
@@ -121,6 +123,20 @@ def test_a_sparse_lidar_adds_its_own_line_to_a_refused_rotation_and_only_then() 
     trusted = Verdict(**{**_verdict("trusted", []).__dict__, "scan_lines": (2.0, 82.8)})
     assert trusted.rotation_advice() == []
     assert "scan_line_spacing" not in refused.to_dict()  # not measured
+
+
+def test_a_sparse_lidar_whose_scenes_show_one_place_is_asked_for_places_first() -> None:
+    """Every 16-beam dev rig is static; a drive thinned to their ring spacing calibrates (stop 40):
+    the one-place line asks for scenes of many places before the board, the others for the board."""
+    from l2e_studio.verdict import sparse_scan_line
+
+    refused = _verdict("not-trusted", ["a single peak"])
+    lines = {places: Verdict(**{**refused.__dict__, "scan_lines": (2.0, 82.8), "places": places}).rotation_advice()[-1]
+             for places in (0, 1, 4)}
+    assert lines[1] == sparse_scan_line(2.0, 82.8, one_place=True) != sparse_scan_line(2.0, 82.8)
+    assert "all these scenes show one place" in lines[1] and "many places" in lines[1] and "Target tab" in lines[1]
+    for places in (0, 4):  # several places, or not counted (a verdict built by hand): the board's line
+        assert lines[places] == sparse_scan_line(2.0, 82.8) and "one place" not in lines[places]
 
 
 def test_the_real_rigs_scan_lines_as_the_verdict_measures_them() -> None:
