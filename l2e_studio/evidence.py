@@ -37,7 +37,7 @@ from .calibrate import CalibrationSettings, Progress, refine
 from .camera import CameraModel
 from .geometry import Extrinsic
 from .objective import SceneStack, single_threaded_blas
-from .peaks import DISTINCT_T, PARTS, RIVAL_SHARE, significance_check, told_apart
+from .peaks import DISTINCT_T, PARTS, RIVAL_DEG, RIVAL_SHARE, significance_check, told_apart
 from .scoring.edges import canny_distance, lidar_edge_weights
 from .verdict_check import Check
 
@@ -118,6 +118,9 @@ class Spread:
 
     deg: float
     m: float = float("nan")
+    #: the second start ended on a rival: another peak at least ``RIVAL_SHARE`` of the result's
+    #: score, ``RIVAL_DEG`` or more away (a peak the data rank alike, not the result's scatter)
+    rival: bool = False
 
     def to_dict(self) -> dict:
         return {"rotation_deg": round(self.deg, 4), **({} if np.isnan(self.m) else {"translation_m": round(self.m, 4)})}
@@ -269,9 +272,11 @@ def evidence(
         checks.append(Check("second start (translation)", m <= AGREE_M or lower,
                             f"from a start mirrored through the result it ends {100 * m:.1f} cm away{scored} "
                             f"(limit {100 * AGREE_M:.0f})"))
+    rival = bool(deg >= RIVAL_DEG and share >= RIVAL_SHARE)  # (nan: it came back, no rival)
     if lower:  # its end estimates another peak, not the result's scatter
         deg, m = 0.0, 0.0
-    return checks, Spread(max(rot_moved + [deg]), float("nan") if settings.rotation_only else max(trans_moved + [m]))
+    return checks, Spread(max(rot_moved + [deg]), float("nan") if settings.rotation_only else max(trans_moved + [m]),
+                          rival)
 
 
 def score_share(final: SceneStack, res: Extrinsic, other: Extrinsic) -> float:

@@ -457,9 +457,13 @@ def judge(
                 kept = "".join(a for a, t in zip("xyz", take) if not t)
                 return trusted("trusted-rotation", mixed, kept, tuple(checks), spread)
     if any(c.name.endswith("(translation)") for c in failed) and not settings.rotation_only and \
-            (rival is None or rival.passed):
+            (rival is None or rival.passed) and not spread.rival:
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
-        # fit the rotation to it (near the result's), and judge that rotation afresh.
+        # fit the rotation to it (near the result's), and judge that rotation afresh. Not where
+        # another peak rivals the result's (the search's ends, the far climbs, the second start):
+        # a re-fit within REFIT_BOUND_DEG of the result cannot choose between the two (a 16-beam
+        # scan's second start ended 8.5 deg away at 89 %, and the re-fit trusted a rotation
+        # 5.4 deg off from a 2 deg seed; benchmarks/results/realdata.md, stop 40).
         rotation = replace(settings, rotation_only=True)
         steps.total += 1 + evidence_steps(rotation)
         steps.next("re-fitting the rotation to the seed's translation")
