@@ -114,7 +114,7 @@ def ring_elevations(points: np.ndarray, bin_deg: float = 0.02, min_range_m: floa
 
 def sparse(rigs: list[Rig], spacing_deg: float) -> list[Rig]:
     """Each rig's scans with only the rings at least ``spacing_deg`` apart (from the top ring
-    down; each kept ring's points within half the gap to its nearest neighbouring ring): a
+    down; each kept ring's points within half the scan's median ring gap of it): a
     64-beam drive seen as a 16-beam lidar would see it (``<rig>~<spacing>deg``), the same camera,
     images and reference. Whether a sparse lidar fails for its rings or for its rigs' static
     scenes can then be told apart."""

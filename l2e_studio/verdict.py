@@ -461,9 +461,9 @@ def judge(
         # A wrong translation also confounds the rotation's checks: keep the seed's translation,
         # fit the rotation to it (near the result's), and judge that rotation afresh. Not where
         # another peak rivals the result's (the search's ends, the far climbs, the second start):
-        # a re-fit within REFIT_BOUND_DEG of the result cannot choose between the two (a 16-beam
-        # scan's second start ended 8.5 deg away at 89 %, and the re-fit trusted a rotation
-        # 5.4 deg off from a 2 deg seed; benchmarks/results/realdata.md, stop 40).
+        # a re-fit within REFIT_BOUND_DEG of the result cannot choose between the two (a KITTI
+        # scan thinned to a VLP-16's rings: its second start ended 8.5 deg away at 89 %, and the
+        # re-fit trusted a rotation 5.4 deg off from a 2 deg seed; realdata.md, stop 40).
         rotation = replace(settings, rotation_only=True)
         steps.total += 1 + evidence_steps(rotation)
         steps.next("re-fitting the rotation to the seed's translation")
