@@ -15,6 +15,7 @@ Also: runs started at the reference, and one-axis sweeps of the new objective (P
     python benchmarks/bench_realdata.py --rigs 1+2,kitti_odometry_00 --split 1  # every scan a rig of its own
     python benchmarks/bench_realdata.py --rigs kitti_odometry_00 --sparse 2 1   # its drive as 16- and 32-beam lidars see it
     python benchmarks/bench_realdata.py --rigs kitti_odometry_00 --sparse 2 --width 346  # ... and a DAVIS346-sized camera
+    python benchmarks/bench_realdata.py --rigs kitti_odometry_00 --sparse 2 --crop 34    # ... or a lens as narrow as HITSZ's
     python benchmarks/bench_realdata.py --table old.json new.json     # two saved runs side by side
     python benchmarks/bench_realdata.py --nudge 1e-4 --save nudged.json  # every seed turned 1e-4 deg more
     python benchmarks/bench_realdata.py --flips plain.json nudged.json   # run by run: verdicts that flipped
@@ -40,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from realdata_rigs import load_rigs, perturbations, resized, sparse, split, synthetic_rigs  # noqa: E402
+from realdata_rigs import cropped, load_rigs, perturbations, resized, sparse, split, synthetic_rigs  # noqa: E402
 
 from l2e_studio.calibrate import CalibrationSettings, calibrate, stack_scenes  # noqa: E402
 from l2e_studio.verdict import judge  # noqa: E402
@@ -262,6 +263,9 @@ def main() -> None:
     p.add_argument("--width", type=int, nargs="+",
                    help="the rigs' images (and cameras) resized to this many pixels across (e.g. 346: a DAVIS346's), "
                         "each width a rig of its own")
+    p.add_argument("--crop", type=float, nargs="+",
+                   help="the rigs' images cut to the central this many degrees across (e.g. 34: HITSZ's narrow "
+                        "lens), each a rig of its own")
     p.add_argument("--save", type=Path, help="write every run's row here (JSON)")
     p.add_argument("--table", type=Path, nargs="+", help="saved runs to tabulate side by side (no calibration)")
     p.add_argument("--nudge", type=float, default=0.0, help="turn every seed this many degrees more (a fixed axis per run)")
@@ -286,6 +290,8 @@ def main() -> None:
         rigs = [r for deg in args.sparse for r in sparse(rigs, deg)]
     if args.width:
         rigs = [r for w in args.width for r in resized(rigs, w)]
+    if args.crop:
+        rigs = [r for deg in args.crop for r in cropped(rigs, deg)]
     if not rigs:
         sys.exit("no real data found under ../shared/realdata (set L2E_REALDATA)")
     if args.sweeps:

@@ -151,6 +151,23 @@ def resized(rigs: list[Rig], width: int) -> list[Rig]:
     return out
 
 
+def cropped(rigs: list[Rig], hfov_deg: float) -> list[Rig]:
+    """Each rig's images cut to the central ``hfov_deg`` degrees across (``<rig>|<hfov>deg``; the
+    rows kept whole): a drive seen through a lens as narrow as HITSZ's (34 deg), the scans and
+    reference the same."""
+    out = []
+    for rig in rigs:
+        cam = rig.camera
+        half = cam.K[0, 0] * np.tan(np.radians(hfov_deg) / 2)
+        u0, u1 = max(int(round(cam.K[0, 2] - half)), 0), min(int(round(cam.K[0, 2] + half)), cam.width)
+        K = cam.K.copy()
+        K[0, 2] -= u0
+        camera = CameraModel(K, u1 - u0, cam.height, cam.D, cam.model)
+        scenes = tuple(replace(sc, event_map=np.ascontiguousarray(sc.event_map[:, u0:u1])) for sc in rig.scenes)
+        out.append(Rig(f"{rig.name}|{hfov_deg:g}deg", camera, rig.reference, scenes, rig.board))
+    return out
+
+
 def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """``n`` (dt, drotvec) offsets of exactly ``m`` metres and ``deg`` degrees, random axes and directions."""
     rng = np.random.default_rng(rng_seed)
