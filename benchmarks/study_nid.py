@@ -18,9 +18,10 @@ Two measurements per rig:
    and of 24 random translations 2 / 5 / 10 cm off, that score at least the reference's value
    (0 everywhere: the score peaks at the reference, as far as these poses see).
 2. *Climb*: the rotation alone (translation held at the seed's) climbed by Nelder-Mead, coarse
-   to fine (maps smoothed 8, 4, 2 px; first simplexes 1, 0.5, 0.25 deg), from ``--seeds`` seeds 2 deg / 10 cm
-   off the reference: the end's rotation error, and the end's score against the reference's. The
-   same climber for every score, so the scores are compared, not the engine's search.
+   to fine (maps smoothed 8, 4, 2 px; first simplexes 1, 0.5, 0.25 deg), from ``--seeds``
+   seeds 2 deg / 10 cm off the reference: the end's rotation error, and the end's score against
+   the reference's. The same climber for every score, so the scores are compared, not the
+   engine's search.
 
     L2E_REALDATA=../shared/realdata python benchmarks/study_nid.py --rigs hitsz_vlp16,lcecalib_rlfs01
 """
