@@ -95,6 +95,13 @@ def split(rigs: list[Rig], k: int = 1) -> list[Rig]:
             for r in rigs for i in range(0, len(r.scenes) - k + 1, k)]
 
 
+def _elevations_deg(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(elevation in deg, range in m) of each of the (N, 3) lidar-frame points (0 deg at range 0)."""
+    P = np.asarray(points, dtype=np.float64)
+    r = np.linalg.norm(P, axis=1)
+    return np.degrees(np.arcsin(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0))), r
+
+
 def ring_elevations(points: np.ndarray, bin_deg: float = 0.02, min_range_m: float = 5.0,
                     min_gap_deg: float = 0.25) -> np.ndarray:
     """The elevations (deg, descending) of a spinning lidar's rings: the peaks, at least
@@ -102,10 +109,8 @@ def ring_elevations(points: np.ndarray, bin_deg: float = 0.02, min_range_m: floa
     (nearer, the lasers' offsets on the head blur the rings as seen from the origin)."""
     from scipy.signal import find_peaks
 
-    P = np.asarray(points, dtype=np.float64)
-    r = np.linalg.norm(P, axis=1)
-    far = r > min_range_m
-    el = np.degrees(np.arcsin(np.clip(P[far, 2] / r[far], -1.0, 1.0)))
+    el, r = _elevations_deg(points)
+    el = el[r > min_range_m]
     edges = np.arange(el.min() - bin_deg, el.max() + 2 * bin_deg, bin_deg)
     h = np.histogram(el, edges)[0].astype(float)
     peaks, _ = find_peaks(h, distance=max(int(min_gap_deg / bin_deg), 1), prominence=0.1 * h.max())
@@ -129,9 +134,7 @@ def sparse(rigs: list[Rig], spacing_deg: float) -> list[Rig]:
         half = 0.5 * float(np.median(gaps))  # the scan's own ring gap bounds how far a ring spreads
         scenes = []
         for sc in rig.scenes:
-            P = np.asarray(sc.points, dtype=np.float64)
-            r = np.linalg.norm(P, axis=1)
-            el = np.degrees(np.arcsin(np.clip(P[:, 2] / np.where(r > 0, r, 1.0), -1.0, 1.0)))
+            el, _ = _elevations_deg(sc.points)
             keep = np.min(np.abs(el[:, None] - np.asarray(kept)[None, :]), axis=1) < half
             scenes.append(replace(sc, points=sc.points[keep], intensity=sc.intensity[keep]))
         out.append(Rig(f"{rig.name}~{spacing_deg:g}deg", rig.camera, rig.reference, tuple(scenes), rig.board))

@@ -243,6 +243,12 @@ class SceneStack:
         return self.points.shape[1]
 
     @cached_property
+    def starts(self) -> np.ndarray:
+        """(S + 1,) where each scene's points begin in the stacked arrays, and the end: scene
+        ``s`` is ``starts[s]:starts[s + 1]`` (the points are sorted by scene)."""
+        return np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
+
+    @cached_property
     def places(self) -> np.ndarray:
         """(S,) the place each scene was recorded at (:func:`l2e_studio.places.places`): the
         scenes of a rig that did not move between them share one."""
@@ -292,7 +298,7 @@ class SceneStack:
         counts)`` runs in the same task once scene ``s`` is counted (e.g. its MI)."""
         R, t = extrinsic.R.astype(np.float32), extrinsic.translation.astype(np.float32)
         e_bins = _e_bins(self.maps)
-        starts = np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
+        starts = self.starts
         joints = np.zeros((self.n_scenes, N_BINS * N_BINS), np.int32)
 
         def scene(s: int) -> None:
@@ -312,7 +318,7 @@ class SceneStack:
         the maps' E bins at this stack's camera (default: its prepared maps')."""
         R, t = extrinsic.R.astype(np.float32), extrinsic.translation.astype(np.float32)
         e_bins = _e_bins(self.maps) if e_bins is None else e_bins
-        starts = np.searchsorted(self.scene_of, np.arange(self.n_scenes + 1))
+        starts = self.starts
         chosen = np.arange(self.n_scenes) if pooled is None else np.flatnonzero(pooled)
         groups = [g for g in np.array_split(chosen, min(WORKERS, max(chosen.size, 1))) if g.size]
         joints = np.zeros((max(len(groups), 1), N_BINS * N_BINS), np.int32)
@@ -370,7 +376,7 @@ class SceneStack:
             raise ValueError("this stack was not built for the edges objective")
         pix = self.pixels(extrinsic)
         S = self.n_scenes
-        starts = np.searchsorted(self.scene_of, np.arange(S + 1))
+        starts = self.starts
         num = np.zeros(S)
 
         def scene(s: int) -> None:
@@ -412,7 +418,7 @@ class SceneStack:
         P, S = len(extrinsics), self.n_scenes
         Rs = np.array([e.R for e in extrinsics], np.float32).reshape(P, 3, 3)
         ts = np.array([e.translation for e in extrinsics], np.float32).reshape(P, 3)
-        starts = np.searchsorted(self.scene_of, np.arange(S + 1))
+        starts = self.starts
         bounds = np.linspace(0, P, min(WORKERS, max(P, 1)) + 1).astype(int)  # the poses, one group per worker
         groups = [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
         out = np.full(P, np.nan)
