@@ -37,7 +37,7 @@ from .calibrate import CalibrationSettings, Progress, refine
 from .camera import CameraModel
 from .geometry import Extrinsic
 from .objective import SceneStack, single_threaded_blas
-from .peaks import DISTINCT_T, PARTS, RIVAL_DEG, RIVAL_SHARE, significance_check, told_apart
+from .peaks import DISTINCT_T, PARTS, RIVAL_DEG, RIVAL_SHARE, significance, told_apart
 from .scoring.edges import canny_distance, lidar_edge_weights
 from .verdict_check import Check
 
@@ -121,6 +121,9 @@ class Spread:
     #: the second start ended on a rival: another peak at least ``RIVAL_SHARE`` of the result's
     #: score, ``RIVAL_DEG`` or more away (a peak the data rank alike, not the result's scatter)
     rival: bool = False
+    #: how far the result's score rose above the seed's, in standard deviations of the
+    #: landscape's own fluctuations (:attr:`l2e_studio.peaks.Significance.rise`; nan: not measured)
+    rise: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"rotation_deg": round(self.deg, 4), **({} if np.isnan(self.m) else {"translation_m": round(self.m, 4)})}
@@ -243,7 +246,7 @@ def evidence(
         latest: list[Progress | None] = [None]
         second_start = pool.submit(refine, stack, *_second_start(seed, res, settings, final.camera),
                                    cancel, lambda p: latest.__setitem__(0, p))
-        checks, rot_moved, trans_moved = _checks_beside(stack, seed, res, settings, second, cancel, steps,
+        checks, rot_moved, trans_moved, rise = _checks_beside(stack, seed, res, settings, second, cancel, steps,
                                                         tag, limit_deg,
                                                         parts() if parts else split(stack, seed, settings.sigma))
         steps.next("a second start, mirrored through the result")
@@ -276,7 +279,7 @@ def evidence(
     if lower:  # its end estimates another peak, not the result's scatter
         deg, m = 0.0, 0.0
     return checks, Spread(max(rot_moved + [deg]), float("nan") if settings.rotation_only else max(trans_moved + [m]),
-                          rival)
+                          rival, rise)
 
 
 def score_share(final: SceneStack, res: Extrinsic, other: Extrinsic) -> float:
@@ -351,10 +354,11 @@ def probe_budget(max_points: int | None) -> int:
 def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings,
                    second: tuple[str, Callable[[Extrinsic], float]], cancel: threading.Event | None, steps: Steps,
                    tag: str, limit_deg: float, parts: tuple[SceneStack, SceneStack]
-                   ) -> tuple[list[Check], list[float], list[float]]:
+                   ) -> tuple[list[Check], list[float], list[float], float]:
     """The checks of :func:`evidence` but the second start: scores, significance, halves (``parts``;
-    ``tag`` after each name, halves agreeing within ``limit_deg``); and how far each half refined
-    alone moved the rotation (deg) and the translation (m)."""
+    ``tag`` after each name, halves agreeing within ``limit_deg``); how far each half refined
+    alone moved the rotation (deg) and the translation (m); and the result's rise above the seed
+    in the landscape's fluctuations (:attr:`l2e_studio.peaks.Significance.rise`)."""
     rotation_only = settings.rotation_only
     final = stack.with_sigma(settings.sigma)
     checks: list[Check] = []
@@ -373,7 +377,8 @@ def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings:
     checks.append(Check("second score" + tag, after >= before - slack, f"{name} {before:.4f} -> {after:.4f}"))
 
     steps.next("a significant peak: the score 2-8 deg around the result against its fluctuations")
-    checks.append(significance_check(final, res, settings, tag))
+    peak = significance(final, res, settings, seed)
+    checks.append(peak.check(tag))
 
     rot_moved: list[float] = []
     trans_moved: list[float] = []
@@ -420,4 +425,4 @@ def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings:
                                 f"refined on either half alone the translation moves {100 * max(trans_moved):.1f} cm "
                                 f"(limit {100 * AGREE_M:.0f})"))
 
-    return checks, rot_moved, trans_moved
+    return checks, rot_moved, trans_moved, peak.rise

@@ -1,7 +1,8 @@
 """Is a calibration result a peak of its score, and the only one? Checks of the landscape.
 
-* :func:`significance_check`: the result's score against the landscape's own fluctuations
-  ``FAR_DEG`` away (is it a peak, or the best of the noise?);
+* :func:`significance`: the result's score against the landscape's own fluctuations
+  ``FAR_DEG`` away (is it a peak, or the best of the noise?), and its rise above the seed's in
+  those fluctuations (does it beat the seed at all?);
 * :func:`far_climbs`: local climbs from the highest points of that far field (picked at the
   coarsest smoothing, where a higher peak nearby has the widest basin): the multi-start search
   starts around the seed, these around the result, so a side peak the search settled on meets
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import ThreadPoolExecutor, wait
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -86,8 +87,28 @@ def far_field(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]
     return angles, stack.scores(starts)
 
 
-def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
-    """Is the result's score a peak above the landscape's own fluctuations, or the best of its noise?
+@dataclass(frozen=True)
+class Significance:
+    """The result's score against the landscape's own fluctuations ``FAR_DEG`` around it, on at
+    most ``FAR_POINTS`` points (:func:`significance`)."""
+
+    z: float  # the result's score above the far field's mean, in the fluctuation's standard deviations
+    need: float  # how high the best of pure noise over the searched box reaches (:func:`noise_ceiling`)
+    noise: float  # that standard deviation, in the score's units
+    #: the result's score above the seed's, in the same standard deviations (nan: no seed given).
+    #: Below SIGNIFICANT (:mod:`l2e_studio.verdict`) the data cannot tell the two apart
+    rise: float = float("nan")
+
+    def check(self, tag: str = "") -> Check:
+        return Check("a significant peak" + tag, bool(self.z >= self.need),
+                     f"the score stands {self.z:.1f} standard deviations above its values {FAR_DEG[0]:g}-{FAR_DEG[1]:g} deg "
+                     f"away (the best of noise over the searched box reaches {self.need:.1f})")
+
+
+def significance(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings,
+                 seed: Extrinsic | None = None) -> Significance:
+    """Is the result's score a peak above the landscape's own fluctuations, or the best of its
+    noise? And (given ``seed``) how far above the seed's does it rise, in those fluctuations?
 
     The fluctuations are what is left of the far field once its steady trend with the distance
     from the result is taken out: the paper's MI on event maps falls smoothly over degrees (a
@@ -98,10 +119,16 @@ def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationS
     trend = np.polyval(np.polyfit(angles, far, 1), angles)
     spread = float(np.sqrt(np.sum((far - trend) ** 2) / (len(far) - 2)))
     z = (at - float(np.mean(far))) / spread if spread > 0 else (np.inf if at > np.mean(far) else 0.0)
-    need = noise_ceiling(settings)
-    return Check("a significant peak" + tag, bool(z >= need),
-                 f"the score stands {z:.1f} standard deviations above its values {FAR_DEG[0]:g}-{FAR_DEG[1]:g} deg "
-                 f"away (the best of noise over the searched box reaches {need:.1f})")
+    rise = float("nan")
+    if seed is not None:
+        gain = at - thin.score(seed, per_scene=False)[0]
+        rise = gain / spread if spread > 0 else (np.inf if gain > 0 else 0.0)
+    return Significance(float(z), noise_ceiling(settings), spread, float(rise))
+
+
+def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
+    """:func:`significance` of ``res`` as a verdict's check."""
+    return significance(stack, res, settings).check(tag)
 
 
 def ranked_far_starts(stack: SceneStack, at: Extrinsic, settings: CalibrationSettings) -> list[Extrinsic]:
