@@ -126,7 +126,8 @@ class Spread:
     rise: float = float("nan")
 
     def to_dict(self) -> dict:
-        return {"rotation_deg": round(self.deg, 4), **({} if np.isnan(self.m) else {"translation_m": round(self.m, 4)})}
+        return {"rotation_deg": round(self.deg, 4), **({} if np.isnan(self.m) else {"translation_m": round(self.m, 4)}),
+                **({"score_rise_sd": round(self.rise, 2)} if np.isfinite(self.rise) else {})}
 
 
 def halves(stack: SceneStack, at: Extrinsic) -> tuple[np.ndarray, np.ndarray]:

@@ -226,7 +226,7 @@ def test_a_seed_at_the_peak_is_confirmed_not_nudged(page, app):
     path, _ = app.save_result()
     doc = yaml.safe_load(path.read_text())
     assert doc["verdict"]["within_spread"]["rotation_from_seed"] is True
-    assert doc["verdict"]["spread"]["rotation_deg"] > 0
+    assert doc["verdict"]["spread"]["rotation_deg"] > 0 and "score_rise_sd" in doc["verdict"]["spread"]
 
 
 def several_peaks_judge(stack, result, settings, cancel=None, on_progress=None):
