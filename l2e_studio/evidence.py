@@ -6,7 +6,7 @@ or never maximised (:func:`evidence`), and the judging's progress and cancel (:c
   within a few pixels of a Canny edge (binary edges, no smoothing, no band-pass: not what the
   edge objective climbs); for event maps, the paper's MI on the raw maps (:func:`second_score`);
 * **a significant peak**: the score at the result against its own random fluctuations around it
-  (:func:`l2e_studio.peaks.significance_check`);
+  (:func:`l2e_studio.peaks.significance`);
 * **halves**: the scenes are split in two (a single scene: its points in alternate vertical strips
   of the image). Each half on its own must score the result above the seed (the optimiser only saw
   their sum), and the result must be a peak of each half: refined on one half alone, it stays;

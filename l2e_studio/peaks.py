@@ -126,11 +126,6 @@ def significance(stack: SceneStack, res: Extrinsic, settings: CalibrationSetting
     return Significance(float(z), noise_ceiling(settings), spread, float(rise))
 
 
-def significance_check(stack: SceneStack, res: Extrinsic, settings: CalibrationSettings, tag: str = "") -> Check:
-    """:func:`significance` of ``res`` as a verdict's check."""
-    return significance(stack, res, settings).check(tag)
-
-
 def ranked_far_starts(stack: SceneStack, at: Extrinsic, settings: CalibrationSettings) -> list[Extrinsic]:
     """:func:`far_starts` of ``at``, best first by their score at the coarsest stage's smoothing
     and scale (where a missed peak nearby has the widest basin)."""

@@ -276,8 +276,9 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
     its halves); else the parts trade against each other and ``handed`` is taken whole if it
     scores above the seed on each (a trusted result does), the seed whole if not.
 
-    The rise is the other measure of a move's significance: the spread of independent estimates
-    is small where every part of the data shares a bias, the rise is not. A KITTI drive thinned
+    The rise is the score's own measure of a move's significance: the spread of independent
+    estimates stays small where every part of the data shares a bias, and says nothing of whether
+    the score prefers the result to the seed by more than its noise. A KITTI drive thinned
     to a VLP-16's rings and cut to a 34 deg lens, started at its reference, climbed 0.6 deg / 13 cm
     away to a peak 1.1 standard deviations higher, with halves and second start within 0.14 deg
     of it; of 498 trusted dev-rig results closer to the reference than their seeds, none rose

@@ -207,19 +207,25 @@ def test_translation_axes_name_what_to_record() -> None:
 
 
 def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
-    """At the truth of the box world the score stands far above its own far field; on an image
-    of pure noise no pose does."""
-    from l2e_studio.peaks import noise_ceiling, significance_check
+    """At the truth of the box world the score stands far above its own far field, and far above
+    a seed 2 deg off; on an image of pure noise no pose does, nor does the truth rise above that
+    seed by more than the noise's own fluctuation."""
+    from l2e_studio.peaks import noise_ceiling, significance
+    from l2e_studio.verdict import SIGNIFICANT
 
     scene, cam, truth = box_world(np.random.default_rng(1))
     settings = CalibrationSettings()
+    seed = truth.perturbed(np.zeros(3), np.radians([1.2, -1.2, 1.0]))
     stack = stack_scenes([scene], cam, truth, settings).with_sigma(settings.sigma)
-    real = significance_check(stack, truth, settings)
-    assert real.passed, real.detail
+    real = significance(stack, truth, settings, seed)
+    assert real.check().passed, real.check().detail
+    assert real.rise > 3 * SIGNIFICANT and real.noise > 0
+    assert significance(stack, truth, settings, truth).rise == 0.0 and np.isnan(significance(stack, truth, settings).rise)
     noise = np.random.default_rng(2).uniform(0, 255, scene.event_map.shape).astype(np.float32)
     noisy = stack_scenes([Scene("noise", scene.points, scene.intensity, noise, "image")], cam, truth, settings)
-    fake = significance_check(noisy.with_sigma(settings.sigma), truth, settings)
-    assert not fake.passed, fake.detail
+    fake = significance(noisy.with_sigma(settings.sigma), truth, settings, seed)
+    assert not fake.check().passed, fake.check().detail
+    assert fake.rise < SIGNIFICANT
     assert 5.0 < noise_ceiling(settings) < 6.0  # +-10 deg at 0.1 deg cells
 
 
