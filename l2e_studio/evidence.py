@@ -122,7 +122,8 @@ class Spread:
     #: score, ``RIVAL_DEG`` or more away (a peak the data rank alike, not the result's scatter)
     rival: bool = False
     #: how far the result's score rose above the seed's, in standard deviations of the
-    #: landscape's own fluctuations (:attr:`l2e_studio.peaks.Significance.rise`; nan: not measured)
+    #: landscape's own fluctuations (:attr:`l2e_studio.peaks.Significance.rise`; nan: not measured;
+    #: a verdict's is that of what the optimiser found, beside a re-fitted rotation's spread too)
     rise: float = float("nan")
 
     def to_dict(self) -> dict:

@@ -266,12 +266,11 @@ class Verdict:
 
 
 def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
-           sides: Sequence[SceneStack], rise: float = float("nan")) -> tuple[Extrinsic, bool, str, str]:
+           sides: Sequence[SceneStack]) -> tuple[Extrinsic, bool, str, str]:
     """``handed`` with the seed's rotation, and the seed's translation along the axes outside
     ``seed_axes``, wherever its move from the seed is within SIGNIFICANT x ``spread``; the seed
-    whole where the result's score ``rise`` above the seed's is under SIGNIFICANT standard
-    deviations of the landscape's fluctuations (:attr:`l2e_studio.peaks.Significance.rise`; nan:
-    not measured). Returns (extrinsic, rotation is the seed's, those translation axes, one
+    whole where the result's score rose less than SIGNIFICANT standard deviations of the
+    landscape's fluctuations above the seed's (``spread.rise``; nan: not measured). Returns (extrinsic, rotation is the seed's, those translation axes, one
     sentence). A partial mix must still score above the seed on each of ``sides`` (the data and
     its halves); else the parts trade against each other and ``handed`` is taken whole if it
     scores above the seed on each (a trusted result does), the seed whole if not.
@@ -289,9 +288,9 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
     mine = np.array([a not in seed_axes for a in "xyz"])  # the result's translation axes
     if np.array_equal(handed.matrix, seed.matrix):
         return seed, True, "".join(a for a, k in zip("xyz", mine) if k), "the optimiser ended at the seed itself"
-    if rise < SIGNIFICANT:  # (nan: not measured, never under)
+    if spread.rise < SIGNIFICANT:  # (nan: not measured, never under)
         return seed, True, "".join(a for a, k in zip("xyz", mine) if k), (
-            f"the result scores only {rise:.1f} standard deviations of the score's own fluctuations above the "
+            f"the result scores only {spread.rise:.1f} standard deviations of the score's own fluctuations above the "
             f"seed (at least {SIGNIFICANT:g} to tell them apart)")
     keep_t = mine & ~(moved > SIGNIFICANT * spread.m)  # (a spread of nan keeps only what did not move)
     shown_rot, shown_t = keep_rot and turn > 1e-9, keep_t & (moved > 1e-12)  # kept, and not the same anyway
@@ -416,7 +415,7 @@ def judge(
     # the data's halves, made once (beside the second start's climb) for every check that asks
     parts = functools.cache(lambda: split(stack, seed, settings.sigma))
     checks, spread = evidence(stack, seed, res, settings, second, cancel, steps, parts)
-    first = spread
+    rise = spread.rise  # the result's, above the seed
     sides = [final, *(part.with_sigma(settings.sigma) for part in parts())]  # the data and its halves
     axes: tuple[AxisPinned, ...] = ()
     if not settings.rotation_only:
@@ -451,9 +450,10 @@ def judge(
     reasons = tuple(f"{c.name}: {c.detail}" for c in failed)
 
     def trusted(status: str, handed: Extrinsic, seed_axes: str, all_checks: tuple[Check, ...], spread: Spread) -> Verdict:
-        # (the rise of the result the optimiser found, a re-fitted rotation's too: does the data
-        # prefer it to the seed at all?)
-        out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides, first.rise)
+        # the rise of what the optimiser found, for a re-fitted rotation too: does the data prefer
+        # it to the seed at all?
+        spread = replace(spread, rise=rise)
+        out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides)
         return Verdict(status, out, False, reasons if status != "trusted" else (), all_checks,
                        time.perf_counter() - t0, axes, seed_axes, spread, seed_rot, settled_axes, settled,
                        places=final.n_places)

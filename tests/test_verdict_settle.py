@@ -142,3 +142,19 @@ def test_a_turn_that_made_up_for_a_move_is_handed_back_whole(stack):
     assert final.score(moved, per_scene=False)[0] < final.score(seed, per_scene=False)[0]  # the mix loses
     out, seed_rot, axes, note = settle(seed, truth, "", spread, sides_of(final, seed))
     assert out is truth and not seed_rot and axes == "" and "handed back whole" in note
+
+
+def test_a_result_that_rises_under_the_scores_fluctuation_leaves_the_seed_whole(stack):
+    """A move far beyond the spread of its independent estimates (a bias every part of the data
+    shares keeps that spread small) is still no move where the score rises less than SIGNIFICANT
+    standard deviations of its own fluctuations above the seed's: the seed stands whole."""
+    final, truth = stack
+    seed = truth.perturbed([0.03, -0.02, 0.03], np.radians([0.6, -0.5, 0.5]))
+    low = Spread(0.05, 0.003, rise=SIGNIFICANT - 0.9)
+    out, seed_rot, axes, note = settle(seed, truth, "z", low, sides_of(final, seed))
+    assert out is seed and seed_rot and axes == "xy" and f"only {SIGNIFICANT - 0.9:.1f} standard deviations" in note
+    v = Verdict("trusted-rotation", out, False, (), (), 0.0, (), "z", low, seed_rot, axes, note)
+    assert v.seed_stands and v.summary().startswith("the seed stands, confirmed: the result scores only")
+    assert v.to_dict()["spread"]["score_rise_sd"] == round(SIGNIFICANT - 0.9, 2)
+    high = Spread(0.05, 0.003, rise=SIGNIFICANT + 5.0)  # the same move, risen clearly: handed back whole
+    assert settle(seed, truth, "", high, sides_of(final, seed))[0] is truth
