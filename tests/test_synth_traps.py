@@ -110,3 +110,26 @@ def test_a_bias_every_scene_shares_is_not_trusted(tmp_path: Path) -> None:
             assert f"rotation: {ROTATION_ADVICE['a significant peak']}" in verdict.advice(), verdict.lines()
         assert verdict.extrinsic.error_to(truth)[0] <= seed_deg + 0.1, verdict.lines()
     assert pulled, "the shared clutter did not pull the optimiser away"
+
+
+def test_a_beam_with_a_footprint_puts_edge_points_at_the_boundary_or_beyond() -> None:
+    """The ``footprint`` trap: a pole 10 m ahead of a wall 30 m away, scanned across at 0.05 deg.
+    Thin rays return the pole only inside its edges; a 3 mrad beam returns the pole's range up to
+    half its width past each edge (foreground inflation), the points placed on the beam's axis."""
+    from l2e_studio.synth.realism import BEAM_DIVERGENCE_MRAD, first_returns
+    from l2e_studio.synth.world import Box, cast
+
+    pole = Box(np.array([10.0, 0.0, 0.0]), np.eye(3), np.array([0.1, 0.1, 2.0]), 0.5)  # 0.2 m wide
+    wall = Box(np.array([30.0, 0.0, 0.0]), np.eye(3), np.array([0.1, 20.0, 5.0]), 0.5)
+    az = np.radians(np.arange(-3.0, 3.0, 0.05))
+    dirs = np.column_stack([np.cos(az), np.sin(az), np.zeros_like(az)])
+    thin = cast([pole, wall], np.zeros(3), dirs, 100.0)
+    wide, used = first_returns([pole, wall], np.zeros(3), dirs, np.eye(3), 100.0)
+    on_thin, on_wide = thin.t < 15.0, wide.t < 15.0
+    half_width = np.arctan2(0.1, 9.9)  # the pole's front face, seen from the lidar
+    assert np.abs(az[on_thin]).max() <= half_width
+    assert np.abs(az[on_wide]).max() > half_width  # past the edge ...
+    assert np.abs(az[on_wide]).max() <= half_width + 0.5e-3 * BEAM_DIVERGENCE_MRAD + 1e-9  # ... by half the beam at most
+    assert on_wide.sum() > on_thin.sum() and np.all(wide.t <= thin.t + 1e-9)
+    # the surface is the ray's that hit it, the point is on the beam's axis
+    assert not np.allclose(used[on_wide & ~on_thin], dirs[on_wide & ~on_thin])

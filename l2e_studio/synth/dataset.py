@@ -37,7 +37,7 @@ from ..errors import InputError
 from ..geometry import LIDAR_TO_CAMERA_AXES, Extrinsic, in_image, project_points
 from .layout import make_layout
 from .lidars import LIDARS, ring_directions
-from .realism import SKY_RANGE_M, TRAPS, camera_image, event_traps, sky_mask
+from .realism import SKY_RANGE_M, TRAPS, camera_image, event_traps, first_returns, sky_mask
 from .world import cast, surface
 
 
@@ -177,7 +177,10 @@ def make_scene(
     # --- lidar ----------------------------------------------------------------------------
     dirs_l = lidar_directions(config, rng)
     dirs_w = dirs_l @ layout.lidar_R.T
-    hits = cast(boxes, layout.lidar_pos, dirs_w, config.max_range_m)
+    if "footprint" in config.active_traps:  # a beam, not a ray: the nearest surface across it
+        hits, dirs_w = first_returns(boxes, layout.lidar_pos, dirs_l, layout.lidar_R, config.max_range_m)
+    else:
+        hits = cast(boxes, layout.lidar_pos, dirs_w, config.max_range_m)
     ok = hits.index >= 0
     dirs_l, dirs_w = dirs_l[ok], dirs_w[ok]
     hits.t, hits.index = hits.t[ok], hits.index[ok]

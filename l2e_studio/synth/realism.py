@@ -11,7 +11,11 @@ Camera images (``map_kind="image"``), rendered by casting a ray per pixel into t
 * ``sky``: far surfaces and the ceiling overexposed to 255 (far, dark lidar points lifted onto a
   saturated sky doubled the MI on real street scenes);
 * ``texture``: a per-surface brightness pattern unrelated to the lidar's reflectivity;
-* ``vegetation``: patches of high-frequency foliage-like texture.
+* ``vegetation``: patches of high-frequency foliage-like texture;
+* ``footprint``: the lidar's beam is ``BEAM_DIVERGENCE_MRAD`` wide, not a thin ray: it returns the
+  nearest surface anywhere across it, placed on its axis, so an object's edge points lie at its
+  boundary or beyond (foreground inflation). With thin rays they lie inside it, up to a step of
+  the scan: an edge score that corrects for that fits thin rays and fails real lidars (stop 41).
 
 Event maps (``map_kind="events"``):
 
@@ -32,10 +36,13 @@ from ..geometry import Extrinsic
 from .world import cast, surface
 
 TRAPS = {
-    "image": ("shading", "sky", "texture", "vegetation"),
+    "image": ("shading", "sky", "texture", "vegetation", "footprint"),
     "events": ("falloff", "flicker", "blooming", "hot_pixels", "hood"),
 }
 SKY_RANGE_M = 22.0  # surfaces farther than this are overexposed by the ``sky`` trap
+#: The ``footprint`` trap's beam width across the scan (full angle): spinning lidars' data
+#: sheets give 2-3 mrad horizontally (Velodyne VLP-16 3.0, Ouster OS1 ~3.1).
+BEAM_DIVERGENCE_MRAD = 3.0
 
 
 def sky_mask(ranges: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -121,3 +128,24 @@ def event_traps(lam: np.ndarray, shape: tuple[int, int], traps: tuple[str, ...],
     if "hood" in traps:
         lam[int(h * 0.88) :] = 0.0
     return lam.ravel()
+
+
+def first_returns(boxes, origin: np.ndarray, dirs_l: np.ndarray, lidar_R: np.ndarray, t_max: float,
+                  divergence_mrad: float = BEAM_DIVERGENCE_MRAD):
+    """The ``footprint`` trap: each beam (unit directions ``dirs_l``, lidar frame) as three rays
+    across its width in azimuth (about the lidar's z axis), the nearest hit of the three. Returns
+    the :class:`~l2e_studio.synth.world.Hits` and, per beam, the world direction of the ray that
+    made it (its surface's normal and reflectivity are that ray's; its point lies on the beam's
+    axis at that range)."""
+    best, best_dirs = None, None
+    for a in (0.0, -0.5e-3 * divergence_mrad, 0.5e-3 * divergence_mrad):
+        c, s = np.cos(a), np.sin(a)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        dirs_w = (dirs_l @ turn.T) @ lidar_R.T
+        hits = cast(boxes, origin, dirs_w, t_max)
+        if best is None:
+            best, best_dirs = hits, dirs_w
+            continue
+        nearer = (hits.index >= 0) & ((best.index < 0) | (hits.t < best.t))
+        best.t[nearer], best.index[nearer], best_dirs[nearer] = hits.t[nearer], hits.index[nearer], dirs_w[nearer]
+    return best, best_dirs
