@@ -176,10 +176,10 @@ def make_scene(
 
     # --- lidar ----------------------------------------------------------------------------
     dirs_l = lidar_directions(config, rng)
-    dirs_w = dirs_l @ layout.lidar_R.T
     if "footprint" in config.active_traps:  # a beam, not a ray: the nearest surface across it
         hits, dirs_w = first_returns(boxes, layout.lidar_pos, dirs_l, layout.lidar_R, config.max_range_m)
     else:
+        dirs_w = dirs_l @ layout.lidar_R.T
         hits = cast(boxes, layout.lidar_pos, dirs_w, config.max_range_m)
     ok = hits.index >= 0
     dirs_l, dirs_w = dirs_l[ok], dirs_w[ok]
