@@ -270,8 +270,8 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
     """``handed`` with the seed's rotation, and the seed's translation along the axes outside
     ``seed_axes``, wherever its move from the seed is within SIGNIFICANT x ``spread``; the seed
     whole where the result's score rose less than SIGNIFICANT standard deviations of the
-    landscape's fluctuations above the seed's (``spread.rise``; nan: not measured). Returns (extrinsic, rotation is the seed's, those translation axes, one
-    sentence). A partial mix must still score above the seed on each of ``sides`` (the data and
+    landscape's fluctuations above the seed's (``spread.rise``; nan: not measured). Returns
+    (extrinsic, rotation is the seed's, those translation axes, one sentence). A partial mix must still score above the seed on each of ``sides`` (the data and
     its halves); else the parts trade against each other and ``handed`` is taken whole if it
     scores above the seed on each (a trusted result does), the seed whole if not.
 

@@ -33,8 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write grey camera images (under image/) instead of accumulated event maps")
     p.add_argument("--realism", action="store_true",
                    help="reproduce real data's failure modes: shading, saturated sky, unrelated texture, foliage and a "
-                        "lidar beam 3 mrad wide for camera images; range fall-off, flickering lamps, blooming, hot pixels and an occluded band for "
-                        "event maps")
+                        "lidar beam 3 mrad wide for camera images; range fall-off, flickering lamps, blooming, hot "
+                        "pixels and an occluded band for event maps")
     p.add_argument("--traps", help="only some failure modes, comma-separated (see --realism)")
     p.add_argument("--dim", action="store_true", help="a dim cloud: intensities 0..14 (the sparse-cloud trap)")
     p.add_argument("--lidar", choices=("vlp16", "hdl32", "hdl64", "os128"),

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..camera import CameraModel
 from ..geometry import Extrinsic
-from .world import cast, surface
+from .world import Box, Hits, cast, surface
 
 TRAPS = {
     "image": ("shading", "sky", "texture", "vegetation", "footprint"),
@@ -130,22 +130,22 @@ def event_traps(lam: np.ndarray, shape: tuple[int, int], traps: tuple[str, ...],
     return lam.ravel()
 
 
-def first_returns(boxes, origin: np.ndarray, dirs_l: np.ndarray, lidar_R: np.ndarray, t_max: float,
-                  divergence_mrad: float = BEAM_DIVERGENCE_MRAD):
+def first_returns(boxes: list[Box], origin: np.ndarray, dirs_l: np.ndarray, lidar_R: np.ndarray, t_max: float,
+                  divergence_mrad: float = BEAM_DIVERGENCE_MRAD) -> tuple[Hits, np.ndarray]:
     """The ``footprint`` trap: each beam (unit directions ``dirs_l``, lidar frame) as three rays
     across its width in azimuth (about the lidar's z axis), the nearest hit of the three. Returns
-    the :class:`~l2e_studio.synth.world.Hits` and, per beam, the world direction of the ray that
-    made it (its surface's normal and reflectivity are that ray's; its point lies on the beam's
-    axis at that range)."""
-    best, best_dirs = None, None
-    for a in (0.0, -0.5e-3 * divergence_mrad, 0.5e-3 * divergence_mrad):
+    the hits and, per beam, the world direction of the ray that made it (its surface's normal and
+    reflectivity are that ray's; its point lies on the beam's axis at that range)."""
+
+    def across(a: float) -> np.ndarray:  # the beam's rays turned ``a`` rad about the lidar's z, in the world
         c, s = np.cos(a), np.sin(a)
-        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        dirs_w = (dirs_l @ turn.T) @ lidar_R.T
+        return (dirs_l @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T) @ lidar_R.T
+
+    best_dirs = across(0.0)
+    best = cast(boxes, origin, best_dirs, t_max)
+    for a in (-0.5e-3 * divergence_mrad, 0.5e-3 * divergence_mrad):
+        dirs_w = across(a)
         hits = cast(boxes, origin, dirs_w, t_max)
-        if best is None:
-            best, best_dirs = hits, dirs_w
-            continue
         nearer = (hits.index >= 0) & ((best.index < 0) | (hits.t < best.t))
         best.t[nearer], best.index[nearer], best_dirs[nearer] = hits.t[nearer], hits.index[nearer], dirs_w[nearer]
     return best, best_dirs
