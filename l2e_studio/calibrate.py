@@ -41,9 +41,14 @@ METHODS = ("SLSQP", "L-BFGS-B", "Powell", "Nelder-Mead")
 GRADIENT_METHODS = ("SLSQP", "L-BFGS-B")
 #: SLSQP stopping tolerance on the MI (nats): loose for the coarse stages, tight for the last
 FTOL_COARSE, FTOL_FINAL = 1e-5, 1e-7
-#: The global stage: rotation corrections on a grid of this step (deg) and half-width (steps)
-#: per axis, scored on at most this many points at the coarsest smoothing.
-GRID_STEP_DEG, GRID_HALF_STEPS, GRID_POINTS, GRID_STARTS = 2.5, 2, 30_000, 2
+#: The edge score's 4 px stage (at 1280x720) runs where it blurs at least this many times the
+#: final smoothing (not on small images, where 4 px scaled down is the final blur).
+MIN_STEP_DOWN = 1.5
+#: The global stage: from every rotation correction of the seed on a grid of this step (deg)
+#: within this radius (deg: the seed's +-5 deg box, its far corners left out), a climb of the
+#: middle stage on at most ``GRID_POINTS`` of the points, the same for every start so that their
+#: ends compare; the ``GRID_STARTS`` best ends at least ``GRID_APART_DEG`` apart climb on.
+GRID_STEP_DEG, GRID_RADIUS_DEG, GRID_POINTS, GRID_STARTS, GRID_APART_DEG = 2.5, 5.6, 10_000, 2, 1.0
 
 
 @dataclass(frozen=True)
@@ -85,24 +90,35 @@ class CalibrationSettings:
         if self.sigma < 0:
             raise ValueError("sigma must be >= 0")
 
-    def schedule(self, image_width: int = 1280, image_height: int | None = None) -> tuple[Stage, ...]:
-        """The stages for maps ``image_width`` x ``image_height`` pixels.
+    def schedule(self, image_width: int = 1280, image_height: int | None = None, objective: str = "mi"
+                 ) -> tuple[Stage, ...]:
+        """The stages for maps ``image_width`` x ``image_height`` pixels scored by ``objective``.
 
         Coarse smoothing is set for the paper's 1280x720 sensor and scaled with the image's
         smaller relative side, so that a stage sees the same angular blur whatever the camera
         and a letterbox image (KITTI's 1242x375) is not blurred to a few rows; coarse maps are
-        downsampled no further than 320 pixels wide.
+        downsampled no further than 320 pixels wide. The edge score steps down through 4 px
+        before its final blur: its peak at 2 px is a degree or less across, narrower than where
+        the 8 px stage ends from a start degrees away (on the OpenCalib manual rig, ends 0.6-0.75
+        deg off the reference that the final stage alone did not climb from); the MI of event
+        maps, smooth at 2 px, needs no such step (and it would cost the 40-scene case a third).
         """
         if self.stages:
             return self.stages
         if not self.coarse_to_fine:
             return (Stage(self.sigma),)
         w = min(image_width / 1280.0, (image_height or 720) / 720.0)
-        return (
+        stages = [
             Stage(max(20.0 * w, self.sigma), 150_000, min(1.0, max(0.25, 320.0 / image_width))),
             Stage(max(8.0 * w, self.sigma), 400_000, min(1.0, max(0.5, 640.0 / image_width))),
-            Stage(self.sigma, 500_000, 1.0),
-        )
+        ]
+        if objective == "edges" and 4.0 * w >= MIN_STEP_DOWN * self.sigma:
+            stages.append(Stage(4.0 * w, 500_000, min(1.0, max(0.5, 640.0 / image_width))))
+        return (*stages, Stage(self.sigma, 500_000, 1.0))
+
+    def stages_for(self, stack: SceneStack) -> tuple[Stage, ...]:
+        """The stages for ``stack``: its maps' size and objective."""
+        return self.schedule(stack.camera.width, stack.camera.height, stack.objective_name)
 
 
 @dataclass(frozen=True)
@@ -235,19 +251,18 @@ def refine(
 def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
     """Climb the schedule from ``seed`` (from several starts with the global search); the run,
     its best end point in ``run.end``."""
-    stages = settings.schedule(stack.camera.width, stack.camera.height)
+    stages = settings.stages_for(stack)
     scale = np.array([settings.translation_bound] * 3 + [np.radians(settings.rotation_bound_deg)] * 3)
     free = np.array([not settings.rotation_only] * 3 + [True] * 3)
     if settings.translation_bound == 0:
         free[:3] = False
     run = _Run(stack, seed, settings, scale, free, stages, on_progress, cancel, t0)
     if _global_search(settings, stack) and len(stages) > 1:
-        # several starts climb every stage, and the seed also skips the coarsest (its blur can
-        # hold side peaks that a seed already in the fine basin should not be dragged to); the
-        # final score picks the answer
+        # the seed climbs every stage and, as a seed already in the fine basin should not be
+        # dragged to a side peak of the coarsest blur, every stage but the coarsest; the grid's
+        # best ends climb on from the middle stage; the final score picks the answer
         final = stack.with_sigma(settings.sigma)
-        grid = _grid_starts(stack.with_sigma(stages[0].sigma, stages[0].scale), seed, free, cancel)
-        climbs = [(seed, 0), (seed, 1)] + [(start, 0) for start in grid]
+        climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed)]
         ends = []
         for start, first in climbs:
             ends.append(run.climb(start, stages[first:], first=first))
@@ -269,24 +284,39 @@ def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
     return stack.objective_name == "edges"
 
 
-def _grid_starts(
-    coarse: SceneStack, seed: Extrinsic, free: np.ndarray, cancel: threading.Event | None = None,
-    count: int = GRID_STARTS,
-) -> list[Extrinsic]:
-    """The ``count`` best rotation corrections of the seed on a grid (the seed itself left
-    out), scored by the coarsest objective on a thinned point set; none once ``cancel`` is set."""
-    if not free[3:].all():
+def _grid_starts(run: "_Run", seed: Extrinsic) -> list[Extrinsic]:
+    """Where the best of the grid's climbs end: each rotation correction of ``seed`` on the grid
+    climbs the middle stage on one thinned point set, and the ``GRID_STARTS`` highest ends at
+    least ``GRID_APART_DEG`` apart are returned (none with the rotation held, none once cancelled).
+
+    Why climbs and not the grid's own scores: a blurred score at a point degrees from any peak
+    ranks the points poorly (on a KITTI scan 5 deg off, the grid point nearest the reference
+    ranked 1st to 62nd of 124 at the coarsest blur), while the climbs from the points within a
+    degree or two of the reference end there and score highest among the ends
+    (benchmarks/study_search.py)."""
+    if not run.free[3:].all():
         return []
-    obj = coarse.objective(seed, max_points=GRID_POINTS)
-    steps = np.radians(GRID_STEP_DEG) * np.arange(-GRID_HALF_STEPS, GRID_HALF_STEPS + 1)
+    n = np.floor(GRID_RADIUS_DEG / GRID_STEP_DEG)
+    steps = np.radians(GRID_STEP_DEG) * np.arange(-n, n + 1)
     grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    grid = grid[np.abs(grid).sum(axis=1) > 0]
-    values = np.empty(len(grid))
-    for i, dw in enumerate(grid):
-        if cancel is not None and cancel.is_set():
+    norms = np.linalg.norm(grid, axis=1)
+    starts = [np.concatenate([np.zeros(3), dw]) for dw in grid[(norms > 0) & (norms <= np.radians(GRID_RADIUS_DEG))]]
+    stage = run.stages[1]
+    obj = run.stack.with_sigma(stage.sigma, stage.scale).objective(
+        seed, max_points=GRID_POINTS, seen_from=[seed.perturbed(d[:3], d[3:]) for d in starts])
+    ends = []
+    for start in starts:
+        x, value = run.climb_objective(obj, 1, start)
+        if run.cancelled:
             return []
-        values[i] = obj.value(np.concatenate([np.zeros(3), dw]))
-    return [obj.extrinsic(np.concatenate([np.zeros(3), grid[i]])) for i in np.argsort(values)[::-1][:count]]
+        ends.append((value, obj.extrinsic(x)))
+    chosen: list[Extrinsic] = []
+    for _, end in sorted(ends, key=lambda ve: -ve[0]):
+        if all(end.error_to(c)[0] >= GRID_APART_DEG for c in chosen):
+            chosen.append(end)
+        if len(chosen) == GRID_STARTS:
+            break
+    return chosen
 
 
 class _Run:
@@ -316,22 +346,27 @@ class _Run:
                 self.cancelled, self.message = True, "cancelled"
                 break
             obj = prepared.objective(self.seed, start=current, max_points=stage.max_points)
-            tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
-                               self.count, self.history)
-            try:
-                res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
-                self.message = str(res.message)
-                x = tracker.full(res.x)
-                if -res.fun < tracker.best_mi:  # keep the best point seen, whatever the optimiser says
-                    x = tracker.best_delta
-            except _Cancelled:
-                self.cancelled, self.message = True, "cancelled"
-                x = tracker.best_delta
-            self.count = tracker.count
-            current = obj.extrinsic(x)
+            current = obj.extrinsic(self.climb_objective(obj, k)[0])
             if self.cancelled:
                 break
         return current
+
+    def climb_objective(self, obj: MapObjective, k: int, start: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """Climb ``obj`` as stage ``k`` from the correction ``start`` (default: the objective's
+        own start); the best correction reached and its value (the best so far once cancelled)."""
+        tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
+                           self.count, self.history, start)
+        try:
+            res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
+            self.message = str(res.message)
+            x, value = tracker.full(res.x), -float(res.fun)
+            if value < tracker.best_mi:  # keep the best point seen, whatever the optimiser says
+                x, value = tracker.best_delta, tracker.best_mi
+        except _Cancelled:
+            self.cancelled, self.message = True, "cancelled"
+            x, value = tracker.best_delta, tracker.best_mi
+        self.count = tracker.count
+        return x, value
 
 
 class _Tracker:
@@ -340,18 +375,19 @@ class _Tracker:
     #: A stage typically takes this many evaluations; progress approaches the stage's end by it.
     TYPICAL_EVALUATIONS = 25.0
 
-    def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history):
+    def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history,
+                 start: np.ndarray | None = None):
         self.obj, self.scale, self.free = obj, scale, free
         self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count, self.history = count, history
         self.start_count = count
-        self.fixed = obj.start.copy()
+        self.fixed = (obj.start if start is None else np.asarray(start, float)).copy()
         self.best_mi = -np.inf
-        self.best_delta = obj.start.copy()
+        self.best_delta = self.fixed.copy()
 
     def z0(self) -> np.ndarray:
-        return (self.obj.start / self.scale)[self.free]
+        return (self.fixed / self.scale)[self.free]
 
     def full(self, z: np.ndarray) -> np.ndarray:
         delta = self.fixed.copy()

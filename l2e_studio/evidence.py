@@ -34,7 +34,6 @@ from typing import Callable
 import numpy as np
 
 from .calibrate import CalibrationSettings, Progress, refine
-from .camera import CameraModel
 from .geometry import Extrinsic
 from .objective import SceneStack, single_threaded_blas
 from .peaks import DISTINCT_T, PARTS, RIVAL_DEG, RIVAL_SHARE, significance, told_apart
@@ -246,7 +245,7 @@ def evidence(
     # two climbs would otherwise restore each other's, and BLAS's thread count moves the last bit
     with single_threaded_blas(), ThreadPoolExecutor(1, thread_name_prefix="l2e-second-start") as pool:
         latest: list[Progress | None] = [None]
-        second_start = pool.submit(refine, stack, *_second_start(seed, res, settings, final.camera),
+        second_start = pool.submit(refine, stack, *_second_start(seed, res, settings, final),
                                    cancel, lambda p: latest.__setitem__(0, p))
         checks, rot_moved, trans_moved, rise = _checks_beside(stack, seed, res, settings, second, cancel, steps,
                                                         tag, limit_deg,
@@ -301,7 +300,7 @@ def agreement_limit(seed: Extrinsic, res: Extrinsic) -> float:
     return min(max(AGREE_DEG, AGREE_FRACTION * seed.error_to(res)[0]), AGREE_MAX_DEG)
 
 
-def _second_start(seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings, camera: CameraModel
+def _second_start(seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings, stack: SceneStack
                   ) -> tuple[Extrinsic, CalibrationSettings]:
     """Where the second start begins (the seed mirrored through the result; the result's
     translation when only the rotation is tested) and how it climbs: every stage on a probe's
@@ -310,17 +309,17 @@ def _second_start(seed: Extrinsic, res: Extrinsic, settings: CalibrationSettings
     if settings.rotation_only:
         start = Extrinsic(start.rotvec, res.translation)
     probe = replace(settings, stages=tuple(
-        replace(st, max_points=probe_budget(st.max_points)) for st in settings.schedule(camera.width, camera.height)))
+        replace(st, max_points=probe_budget(st.max_points)) for st in settings.stages_for(stack)))
     return start, probe
 
 
-def local_settings(settings: CalibrationSettings, camera: CameraModel, box_m: float,
+def local_settings(settings: CalibrationSettings, stack: SceneStack, box_m: float,
                    from_middle: bool = False) -> CalibrationSettings:
     """How a probe refines locally: the final stage (``from_middle``: every stage but the
     coarsest, coarse to fine, as the search climbs its seed a second time) on a probe's budget,
     no global search, within ``HALF_BOX_DEG`` and ``box_m`` (or the settings' own bounds when
     smaller) of where it starts."""
-    stages = settings.schedule(camera.width, camera.height)
+    stages = settings.stages_for(stack)
     return replace(settings, stages=tuple(replace(st, max_points=probe_budget(st.max_points))
                                           for st in (stages[1:] if from_middle else stages[-1:])), global_search=False,
                    rotation_bound_deg=min(settings.rotation_bound_deg, HALF_BOX_DEG),
@@ -336,7 +335,7 @@ def climbs_back(sides: list[SceneStack], res: Extrinsic, axis: int, distance: fl
     A flat axis leaves a start where it is; a rotation that makes up for the move keeps it there;
     halves that disagree end apart. Only an axis both halves climb back along is pinned by them."""
     worst = 0.0
-    local = local_settings(settings, sides[0].camera, 2 * distance)  # a box that reaches back past the result
+    local = local_settings(settings, sides[0], 2 * distance)  # a box that reaches back past the result
     for half in sides:
         for sign in (-1.0, 1.0):
             step = np.zeros(3)
@@ -399,8 +398,8 @@ def _checks_beside(stack: SceneStack, seed: Extrinsic, res: Extrinsic, settings:
         # middle stage 0.03-0.15 deg, where 1+2's scans still move 1.2-2.2 deg). The rotation
         # alone: through the coarse stages a translation drifts further than the final stage
         # brings back on a probe's budget (3.3 cm on 8 synthetic 32-beam scenes).
-        local = local_settings(settings, final.camera, HALF_BOX_M)
-        coarse = replace(local_settings(settings, final.camera, HALF_BOX_M, from_middle=True), rotation_only=True)
+        local = local_settings(settings, final, HALF_BOX_M)
+        coarse = replace(local_settings(settings, final, HALF_BOX_M, from_middle=True), rotation_only=True)
         climb_coarse = final.n_places >= 2 and len(coarse.stages) > 1  # (one stage: the final one, climbed already)
         better, detail = True, []
         for i, part in enumerate(parts):  # (each climbs the stages the run prepared, not prepared again)

@@ -35,7 +35,7 @@ def _evidence_with_second_start_at(monkeypatch, stack, seed, res, end, rotation_
     """``evidence`` of ``res`` where the second start's climb ends at ``end`` (the halves climb for real)."""
     real = evidence.refine
     settings = CalibrationSettings(objective="edges", global_search=False, rotation_only=rotation_only)
-    start, _ = evidence._second_start(seed, res, settings, stack.camera)
+    start, _ = evidence._second_start(seed, res, settings, stack)
 
     def refine(st, begin, settings, *args, **kwargs):
         if np.allclose(begin.matrix, start.matrix):

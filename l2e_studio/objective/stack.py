@@ -447,12 +447,17 @@ class SceneStack:
 
     # --- the optimiser's objective -------------------------------------------------------
     def objective(
-        self, base: Extrinsic, start: Extrinsic | None = None, max_points: int | None = None
+        self, base: Extrinsic, start: Extrinsic | None = None, max_points: int | None = None,
+        seen_from: Sequence[Extrinsic] = (),
     ) -> "MapObjective":
         """The differentiable score as a function of a correction of ``base``, over the points
-        that land in the image at ``start`` (default: ``base``), thinned to ``max_points``."""
+        that land in the image at ``start`` (default: ``base``) or at any of ``seen_from`` (one
+        point set for climbs from many starts), thinned to ``max_points``."""
         start = base if start is None else start
-        inside = np.flatnonzero(self.pixels(start) >= 0)
+        seen = self.pixels(start) >= 0
+        for extrinsic in seen_from:
+            seen |= self.pixels(extrinsic) >= 0
+        inside = np.flatnonzero(seen)
         cls = EdgeObjective if self.objective_name == "edges" else MIObjective
         return cls(self.select(evenly(inside, max_points)), base, start)  # one copy, not two
 
