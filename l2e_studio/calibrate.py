@@ -49,6 +49,8 @@ MIN_STEP_DOWN = 1.5
 #: middle stage on at most ``GRID_POINTS`` of the points, the same for every start so that their
 #: ends compare; the ``GRID_STARTS`` best ends at least ``GRID_APART_DEG`` apart climb on.
 GRID_STEP_DEG, GRID_RADIUS_DEG, GRID_POINTS, GRID_STARTS, GRID_APART_DEG = 2.5, 5.6, 10_000, 2, 1.0
+#: The share of a global search's progress its grid climbs take (about their share of the time).
+GRID_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -262,10 +264,11 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
         # dragged to a side peak of the coarsest blur, every stage but the coarsest; the grid's
         # best ends climb on from the middle stage; the final score picks the answer
         final = stack.with_sigma(settings.sigma)
-        climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed)]
+        climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed, (0.0, GRID_SHARE))]
         ends = []
-        for start, first in climbs:
-            ends.append(run.climb(start, stages[first:], first=first))
+        for j, (start, first) in enumerate(climbs):
+            step = (1.0 - GRID_SHARE) / len(climbs)
+            ends.append(run.climb(start, stages[first:], first=first, part=(GRID_SHARE + j * step, GRID_SHARE + (j + 1) * step)))
             if run.cancelled:
                 break
         run.ends = tuple((e, final.score(e, per_scene=False)[0]) for e in ends)
@@ -284,7 +287,7 @@ def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
     return stack.objective_name == "edges"
 
 
-def _grid_starts(run: "_Run", seed: Extrinsic) -> list[Extrinsic]:
+def _grid_starts(run: "_Run", seed: Extrinsic, part: tuple[float, float] = (0.0, 1.0)) -> list[Extrinsic]:
     """Where the best of the grid's climbs end: each rotation correction of ``seed`` on the grid
     climbs the middle stage on one thinned point set, and the ``GRID_STARTS`` highest ends at
     least ``GRID_APART_DEG`` apart are returned (none with the rotation held, none once cancelled).
@@ -305,8 +308,9 @@ def _grid_starts(run: "_Run", seed: Extrinsic) -> list[Extrinsic]:
     obj = run.stack.with_sigma(stage.sigma, stage.scale).objective(
         seed, max_points=GRID_POINTS, seen_from=[seed.perturbed(d[:3], d[3:]) for d in starts])
     ends = []
-    for start in starts:
-        x, value = run.climb_objective(obj, 1, start)
+    step = (part[1] - part[0]) / len(starts)
+    for i, start in enumerate(starts):
+        x, value = run.climb_objective(obj, 1, start, part=(part[0] + i * step, part[0] + (i + 1) * step))
         if run.cancelled:
             return []
         ends.append((value, obj.extrinsic(x)))
@@ -334,10 +338,13 @@ class _Run:
         self.end = seed  # where the search ended (set by _search)
         self.ends: tuple[tuple[Extrinsic, float], ...] = ()  # every start's end and final score
 
-    def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0) -> Extrinsic:
-        """Climb ``stages`` (numbered from ``first``) from ``start``; the best point reached."""
+    def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0,
+              part: tuple[float, float] = (0.0, 1.0)) -> Extrinsic:
+        """Climb ``stages`` (numbered from ``first``) from ``start``, the progress reported
+        across ``part`` of the whole search; the best point reached."""
         current = start
-        for k, stage in enumerate(stages, start=first):
+        lo, hi = part
+        for i, (k, stage) in enumerate(enumerate(stages, start=first)):
             if self.cancel is not None and self.cancel.is_set():
                 self.cancelled, self.message = True, "cancelled"
                 break
@@ -346,16 +353,19 @@ class _Run:
                 self.cancelled, self.message = True, "cancelled"
                 break
             obj = prepared.objective(self.seed, start=current, max_points=stage.max_points)
-            current = obj.extrinsic(self.climb_objective(obj, k)[0])
+            step = (hi - lo) / len(stages)
+            current = obj.extrinsic(self.climb_objective(obj, k, part=(lo + i * step, lo + (i + 1) * step))[0])
             if self.cancelled:
                 break
         return current
 
-    def climb_objective(self, obj: MapObjective, k: int, start: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    def climb_objective(self, obj: MapObjective, k: int, start: np.ndarray | None = None,
+                        part: tuple[float, float] = (0.0, 1.0)) -> tuple[np.ndarray, float]:
         """Climb ``obj`` as stage ``k`` from the correction ``start`` (default: the objective's
-        own start); the best correction reached and its value (the best so far once cancelled)."""
+        own start), the progress reported across ``part`` of the search; the best correction
+        reached and its value (the best so far once cancelled)."""
         tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
-                           self.count, self.history, start)
+                           self.count, self.history, start, part)
         try:
             res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
             self.message = str(res.message)
@@ -376,11 +386,12 @@ class _Tracker:
     TYPICAL_EVALUATIONS = 25.0
 
     def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history,
-                 start: np.ndarray | None = None):
+                 start: np.ndarray | None = None, part: tuple[float, float] = (0.0, 1.0)):
         self.obj, self.scale, self.free = obj, scale, free
         self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count, self.history = count, history
+        self.part = part
         self.start_count = count
         self.fixed = (obj.start if start is None else np.asarray(start, float)).copy()
         self.best_mi = -np.inf
@@ -413,7 +424,7 @@ class _Tracker:
                     mi=mi,
                     best_mi=self.best_mi,
                     best=self.obj.extrinsic(self.best_delta),
-                    fraction=(self.stage + done) / self.stages,
+                    fraction=self.part[0] + (self.part[1] - self.part[0]) * done,
                     elapsed=time.perf_counter() - self.t0,
                 )
             )

@@ -87,3 +87,22 @@ def test_a_cancel_during_the_grids_climbs_stops_the_search(small_synth) -> None:
     assert result.cancelled and result.evaluations == 30
     assert set(seen) == {1}  # the grid climbs the middle stage
     assert np.allclose(result.extrinsic.matrix, seed.matrix)
+
+
+def test_the_progress_of_a_global_search_never_runs_backwards(small_synth) -> None:
+    """The grid's climbs and the climbs from the best ends each report across their own part
+    of the bar: it rises from the first evaluation to the last (before, each start's climb began
+    the bar again at its first stage)."""
+    scenes, camera, truth = small_synth
+    settings = CalibrationSettings(objective="edges")
+    stack = stack_scenes(scenes, camera, truth, settings)
+    seed = truth.perturbed(np.array([0.05, 0.0, 0.0]), np.radians([2.0, 0.0, 1.0]))
+    fractions, stages = [], set()
+
+    def on_progress(p) -> None:
+        fractions.append(p.fraction)
+        stages.add(p.stage)
+
+    result = calibrate(stack, None, seed, settings, on_progress=on_progress)
+    assert len(fractions) == result.evaluations and stages == set(range(len(settings.stages_for(stack))))
+    assert np.all(np.diff(fractions) >= 0) and fractions[0] < 0.01 and 0.9 < fractions[-1] <= 1.0
