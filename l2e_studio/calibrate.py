@@ -9,7 +9,9 @@ The search is over a correction ``(dt, dw)`` of the seed (camera frame; ``R = ex
 ``t = t_seed + dt``) bounded per axis by ``translation_bound`` metres and
 ``rotation_bound_deg`` degrees. Stages run from wide to narrow map smoothing (and from a thinned
 point set on downsampled maps to the full set at full resolution): the 20 px stage sees a basin
-several degrees across, the last one climbs the paper's objective at ``sigma``. Stages thin the
+several degrees across, the last one climbs the paper's objective at ``sigma``. The edge score,
+whose landscape holds side peaks, is searched from many starts: the seed, and the best ends of
+climbs from a grid of rotations around it (:func:`_grid_starts`). Stages thin the
 points to a budget (500k for the last: 40 full-size scenes put ~1.3M in the image, and all of them
 move the optimum by less than the spread of repeated runs while costing 3x).
 
