@@ -267,9 +267,8 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
         # best ends climb on from the middle stage; the final score picks the answer
         final = stack.with_sigma(settings.sigma)
         climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed, (0.0, GRID_SHARE))]
-        ends = []
+        ends, step = [], (1.0 - GRID_SHARE) / len(climbs)
         for j, (start, first) in enumerate(climbs):
-            step = (1.0 - GRID_SHARE) / len(climbs)
             ends.append(run.climb(start, stages[first:], first=first, part=(GRID_SHARE + j * step, GRID_SHARE + (j + 1) * step)))
             if run.cancelled:
                 break
@@ -345,8 +344,9 @@ class _Run:
         """Climb ``stages`` (numbered from ``first``) from ``start``, the progress reported
         across ``part`` of the whole search; the best point reached."""
         current = start
-        lo, hi = part
-        for i, (k, stage) in enumerate(enumerate(stages, start=first)):
+        lo, step = part[0], (part[1] - part[0]) / max(len(stages), 1)
+        for i, stage in enumerate(stages):
+            k = first + i
             if self.cancel is not None and self.cancel.is_set():
                 self.cancelled, self.message = True, "cancelled"
                 break
@@ -355,7 +355,6 @@ class _Run:
                 self.cancelled, self.message = True, "cancelled"
                 break
             obj = prepared.objective(self.seed, start=current, max_points=stage.max_points)
-            step = (hi - lo) / len(stages)
             current = obj.extrinsic(self.climb_objective(obj, k, part=(lo + i * step, lo + (i + 1) * step))[0])
             if self.cancelled:
                 break
