@@ -13,8 +13,8 @@ from the truth. So the result is judged by what the optimiser never saw or never
   (the score at random rotations 2-8 deg away, its steady trend with the distance taken out). Halves, second starts and the second score all
   agree when every scene shares one bias (a static rig records one background many times), but a
   landscape at noise level puts its highest point wherever the noise does: the result's height
-  above that far field, in standard deviations, must exceed what the best of noise reaches over
-  the searched box (:func:`l2e_studio.peaks.noise_ceiling`).
+  above that far field, in standard deviations, must exceed what the best of noise over the
+  searched box passes only once in a hundred (:func:`l2e_studio.peaks.noise_ceiling`).
 * **a single peak** (after a global search): climbs from the far field's best starts around the
   result must not end higher, or nearly as high, somewhere else (:func:`l2e_studio.peaks.rival_check`).
 

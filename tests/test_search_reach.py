@@ -106,3 +106,17 @@ def test_the_progress_of_a_global_search_never_runs_backwards(small_synth) -> No
     result = calibrate(stack, None, seed, settings, on_progress=on_progress)
     assert len(fractions) == result.evaluations and stages == set(range(len(settings.stages_for(stack))))
     assert np.all(np.diff(fractions) >= 0) and fractions[0] < 0.01 and 0.9 < fractions[-1] <= 1.0
+
+
+def test_the_best_of_pure_noise_over_a_box_seldom_passes_the_significance_ceiling() -> None:
+    """The ceiling is the level the highest of the box's independent cells exceeds only
+    ``NOISE_P`` of the time: drawn, a box of 1000 cells passes it about once in a hundred, and
+    the expected maximum sqrt(2 ln N) (the rule before stop 42) about once in ten."""
+    from l2e_studio.peaks import CELL_DEG, NOISE_P, noise_ceiling
+
+    settings = CalibrationSettings(rotation_bound_deg=5 * CELL_DEG)  # (10 cells a side)^3 = 1000
+    need = noise_ceiling(settings)
+    best = np.random.default_rng(7).standard_normal((20_000, 1000)).max(axis=1)
+    assert abs(np.mean(best > need) - NOISE_P) < 0.004
+    assert np.mean(best > np.sqrt(2 * np.log(1000))) > 0.06
+    assert 5.9 < noise_ceiling(CalibrationSettings()) < 6.0  # the default +-10 deg
