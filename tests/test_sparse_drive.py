@@ -45,7 +45,11 @@ def test_a_thinned_scan_alone_whose_second_start_finds_a_rival_peak_is_not_trust
     5.5 deg off, whose 6-DoF second start ends 8.5 deg away on another peak scoring 89 % of it.
     The rotation re-fitted to the seed's translation (within 1 deg of the result) came back to the
     result and passed every check of its own: `trusted-rotation`, 5.4 deg off. A re-fit cannot
-    choose between two peaks, so none is tried where the second start found a rival."""
+    choose between two peaks, so none is tried where the second start found a rival.
+
+    Since stop 42 the search reaches that peak from both starts (it scores 2.2 times the
+    reference's, 9.6 deviations high) and the second start agrees with it; what refuses it is
+    the scan itself: a sparse lidar's one place (`places for a sparse lidar`)."""
     rigs = load_rigs(["kitti_odometry_00"])
     if not rigs:
         pytest.skip("../shared/realdata is absent")
@@ -60,8 +64,10 @@ def test_a_thinned_scan_alone_whose_second_start_finds_a_rival_peak_is_not_trust
     seed_deg, end_deg = seed.error_to(rig.reference)[0], verdict.extrinsic.error_to(rig.reference)[0]
     assert not (verdict.trusted and end_deg > seed_deg + 0.1), verdict.lines()
     if result.extrinsic.error_to(rig.reference)[0] > 4.0:  # the far peak (on this host's arithmetic, every time)
-        assert verdict.status == "not-trusted" and verdict.spread.rival, verdict.lines()
+        assert verdict.status == "not-trusted", verdict.lines()
         assert not any(c.name.endswith("(rotation only)") for c in verdict.checks)  # no re-fit was tried
+        assert [c.passed for c in verdict.checks if c.name == "places for a sparse lidar"] == [False]
+        assert any("show one place" in line for line in verdict.rotation_advice()), verdict.rotation_advice()
 
 
 def test_started_at_the_reference_a_shared_bias_that_barely_beats_it_leaves_the_seed() -> None:
