@@ -120,3 +120,20 @@ def test_the_best_of_pure_noise_over_a_box_seldom_passes_the_significance_ceilin
     assert abs(np.mean(best > need) - NOISE_P) < 0.004
     assert np.mean(best > np.sqrt(2 * np.log(1000))) > 0.06
     assert 5.9 < noise_ceiling(CalibrationSettings()) < 6.0  # the default +-10 deg
+
+
+def test_a_sparse_lidars_one_place_fails_the_places_check_and_two_places_pass(small_synth) -> None:
+    from l2e_studio.verdict import places_check
+
+    scenes, camera, truth = small_synth
+    edges = SceneStack.build(scenes, camera, sigma=2.0, objective="edges")
+    assert edges.n_places >= 2
+    one = edges.subset([0])
+    assert one.n_places == 1
+    failed = places_check(one, (2.0, 30.0))
+    assert failed is not None and not failed.passed and "1 place" in failed.detail
+    assert places_check(edges, (2.0, 30.0)).passed
+    assert places_check(one, (0.4, 6.0)) is None  # a dense lidar: no such check
+    assert places_check(one, (float("nan"), float("nan"))) is None  # no scan lines to measure
+    mi = SceneStack.build(scenes, camera, sigma=2.0, objective="mi").subset([0])
+    assert places_check(mi, (2.0, 30.0)) is None  # event maps of laser returns: the paper's MI
