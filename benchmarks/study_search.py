@@ -39,10 +39,7 @@ def grid_detail(stack, seed, reference, settings) -> str:
 
     stages = settings.schedule(stack.camera.width, stack.camera.height)
     coarse = stack.with_sigma(stages[0].sigma, stages[0].scale).objective(seed, max_points=cal.GRID_POINTS)
-    n = int(np.floor(cal.GRID_RADIUS_DEG / cal.GRID_STEP_DEG))
-    steps = np.radians(cal.GRID_STEP_DEG) * np.arange(-n, n + 1)
-    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    grid = grid[np.linalg.norm(grid, axis=1) <= np.radians(cal.GRID_RADIUS_DEG)]
+    grid = cal.grid_rotations()
     deltas = [np.concatenate([np.zeros(3), dw]) for dw in grid]
     values = np.array([coarse.value(d) for d in deltas])
     errors = np.array([coarse.extrinsic(d).error_to(reference)[0] for d in deltas])

@@ -288,6 +288,16 @@ def _global_search(settings: CalibrationSettings, stack: SceneStack) -> bool:
     return stack.objective_name == "edges"
 
 
+def grid_rotations() -> np.ndarray:
+    """(56, 3) the global stage's rotation corrections (rad, rotation vectors in the camera
+    frame): the ``GRID_STEP_DEG`` grid within ``GRID_RADIUS_DEG``, the zero correction left out."""
+    n = np.floor(GRID_RADIUS_DEG / GRID_STEP_DEG)
+    steps = np.radians(GRID_STEP_DEG) * np.arange(-n, n + 1)
+    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    norms = np.linalg.norm(grid, axis=1)
+    return grid[(norms > 0) & (norms <= np.radians(GRID_RADIUS_DEG))]
+
+
 def _grid_starts(run: "_Run", seed: Extrinsic, part: tuple[float, float] = (0.0, 1.0)) -> list[Extrinsic]:
     """Where the best of the grid's climbs end: each rotation correction of ``seed`` on the grid
     climbs the middle stage on one thinned point set, and the ``GRID_STARTS`` highest ends at
@@ -300,11 +310,7 @@ def _grid_starts(run: "_Run", seed: Extrinsic, part: tuple[float, float] = (0.0,
     (benchmarks/study_search.py)."""
     if not run.free[3:].all():
         return []
-    n = np.floor(GRID_RADIUS_DEG / GRID_STEP_DEG)
-    steps = np.radians(GRID_STEP_DEG) * np.arange(-n, n + 1)
-    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
-    norms = np.linalg.norm(grid, axis=1)
-    starts = [np.concatenate([np.zeros(3), dw]) for dw in grid[(norms > 0) & (norms <= np.radians(GRID_RADIUS_DEG))]]
+    starts = [np.concatenate([np.zeros(3), dw]) for dw in grid_rotations()]
     stage = run.stages[1]
     obj = run.stack.with_sigma(stage.sigma, stage.scale).objective(
         seed, max_points=GRID_POINTS, seen_from=[seed.perturbed(d[:3], d[3:]) for d in starts])

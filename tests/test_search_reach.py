@@ -137,3 +137,13 @@ def test_a_sparse_lidars_one_place_fails_the_places_check_and_two_places_pass(sm
     assert places_check(one, (float("nan"), float("nan"))) is None  # no scan lines to measure
     mi = SceneStack.build(scenes, camera, sigma=2.0, objective="mi").subset([0])
     assert places_check(mi, (2.0, 30.0)) is None  # event maps of laser returns: the paper's MI
+
+
+def test_the_grid_holds_the_seeds_box_without_its_far_corners() -> None:
+    from l2e_studio.calibrate import GRID_RADIUS_DEG, GRID_STEP_DEG, grid_rotations
+
+    grid = np.degrees(grid_rotations())
+    norms = np.linalg.norm(grid, axis=1)
+    assert grid.shape == (56, 3) and norms.min() == pytest.approx(GRID_STEP_DEG) and norms.max() <= GRID_RADIUS_DEG
+    assert np.allclose(np.round(grid / GRID_STEP_DEG), grid / GRID_STEP_DEG)  # on the grid
+    assert np.any(np.all(np.isclose(grid, [5.0, 2.5, 0.0]), axis=1))  # 5.6 deg reaches (5, 2.5, 0)

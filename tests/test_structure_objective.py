@@ -218,13 +218,16 @@ def test_the_significance_of_a_peak_separates_a_real_peak_from_noise() -> None:
     seed = truth.perturbed(np.zeros(3), np.radians([1.2, -1.2, 1.0]))
     stack = stack_scenes([scene], cam, truth, settings).with_sigma(settings.sigma)
     real = significance(stack, truth, settings, seed)
-    assert real.check().passed, real.check().detail
+    # 5.7 deviations: above the expected best of noise over the box (5.6), under the level it
+    # passes once in a hundred (5.96, since stop 42); this one sparse scan of one place is not
+    # trusted for that (nor for its place), but its truth stands clear of the noise's own peak
+    assert 5.0 < real.z < real.need, real.check().detail
     assert real.rise > 3 * SIGNIFICANT and real.noise > 0
     assert significance(stack, truth, settings, truth).rise == 0.0 and np.isnan(significance(stack, truth, settings).rise)
     noise = np.random.default_rng(2).uniform(0, 255, scene.event_map.shape).astype(np.float32)
     noisy = stack_scenes([Scene("noise", scene.points, scene.intensity, noise, "image")], cam, truth, settings)
     fake = significance(noisy.with_sigma(settings.sigma), truth, settings, seed)
-    assert not fake.check().passed, fake.check().detail
+    assert not fake.check().passed and fake.z < real.z - 2, fake.check().detail
     assert fake.rise < SIGNIFICANT
     assert 5.0 < noise_ceiling(settings) < 6.0  # +-10 deg at 0.1 deg cells
 
@@ -274,8 +277,10 @@ def test_one_scene_is_split_into_strips_and_never_hands_back_its_own_translation
     result = calibrate(stack, None, seed, settings)
     assert result.extrinsic.error_to(truth)[0] < 0.6 * seed.error_to(truth)[0]
     verdict = judge(stack, result, settings)
-    # the rotation's checks pass; the optimiser's translation is 11 cm off here, the seed's 4 cm
-    assert verdict.status == "trusted-rotation", verdict.reasons
+    # the optimiser's translation is 11 cm off here, the seed's 4 cm: one scene pins no axis.
+    # Its scan lines lie 1.6 deg apart and it is one place: since stop 42 its rotation is not
+    # trusted either (places for a sparse lidar), and the seed is handed back whole
     assert all(a.one_place and not a.pinned for a in verdict.translation)
-    assert verdict.seed_axes == "xyz" and np.array_equal(verdict.extrinsic.translation, seed.translation)
-    assert verdict.extrinsic.error_to(truth)[0] < seed.error_to(truth)[0]
+    assert np.array_equal(verdict.extrinsic.translation, seed.translation)
+    assert [c.passed for c in verdict.checks if c.name == "places for a sparse lidar"] == [False]
+    assert verdict.status == "not-trusted" and verdict.kept_seed, verdict.reasons
