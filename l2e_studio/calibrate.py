@@ -112,12 +112,13 @@ class CalibrationSettings:
         if not self.coarse_to_fine:
             return (Stage(self.sigma),)
         w = min(image_width / 1280.0, (image_height or 720) / 720.0)
+        half = min(1.0, max(0.5, 640.0 / image_width))  # the middle stages' maps: no finer than 640 px wide
         stages = [
             Stage(max(20.0 * w, self.sigma), 150_000, min(1.0, max(0.25, 320.0 / image_width))),
-            Stage(max(8.0 * w, self.sigma), 400_000, min(1.0, max(0.5, 640.0 / image_width))),
+            Stage(max(8.0 * w, self.sigma), 400_000, half),
         ]
         if objective == "edges" and 4.0 * w >= MIN_STEP_DOWN * self.sigma:
-            stages.append(Stage(4.0 * w, 500_000, min(1.0, max(0.5, 640.0 / image_width))))
+            stages.append(Stage(4.0 * w, 500_000, half))
         return (*stages, Stage(self.sigma, 500_000, 1.0))
 
     def stages_for(self, stack: SceneStack) -> tuple[Stage, ...]:

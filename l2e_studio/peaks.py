@@ -135,7 +135,7 @@ def significance(stack: SceneStack, res: Extrinsic, settings: CalibrationSetting
 def ranked_far_starts(stack: SceneStack, at: Extrinsic, settings: CalibrationSettings) -> list[Extrinsic]:
     """:func:`far_starts` of ``at``, best first by their score at the coarsest stage's smoothing
     and scale (where a missed peak nearby has the widest basin)."""
-    first = settings.schedule(stack.camera.width, stack.camera.height)[0]
+    first = settings.stages_for(stack)[0]
     coarse = stack.with_sigma(first.sigma, first.scale).thinned(FAR_POINTS)
     _, starts = far_starts(at)
     return [starts[i] for i in np.argsort(-coarse.scores(starts))]

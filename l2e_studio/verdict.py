@@ -422,7 +422,7 @@ def judge(
         steps.next("translation probes: the result moved 5 cm along x, y, z")
         # the stack evenly thinned to the final stage's point budget (the budget counts points in
         # the image, this the whole stack: fewer in the image; every point on every real dev rig)
-        probed = final.thinned(settings.schedule(final.camera.width, final.camera.height)[-1].max_points)
+        probed = final.thinned(settings.stages_for(final)[-1].max_points)
         drops = translation_drops(probed, res, probed.score(res, per_scene=False)[0])
         need = OBSERVABLE_DROP[final.objective_name]
         returned = np.full(3, np.nan)
