@@ -138,6 +138,9 @@ class Progress:
     best: Extrinsic
     fraction: float  # 0..1, a rough share of the work done
     elapsed: float  # seconds
+    #: which climb of a multi-start search this is ("grid start 12/56", "climb 2/4"; "" for one climb):
+    #: the grid's starts all climb the middle stage, and each later climb begins its stages again
+    phase: str = ""
 
 
 @dataclass
@@ -270,7 +273,8 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
         climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed, (0.0, GRID_SHARE))]
         ends, step = [], (1.0 - GRID_SHARE) / len(climbs)
         for j, (start, first) in enumerate(climbs):
-            ends.append(run.climb(start, stages[first:], first=first, part=(GRID_SHARE + j * step, GRID_SHARE + (j + 1) * step)))
+            ends.append(run.climb(start, stages[first:], first=first, part=(GRID_SHARE + j * step, GRID_SHARE + (j + 1) * step),
+                                  phase=f"climb {j + 1}/{len(climbs)}"))
             if run.cancelled:
                 break
         run.ends = tuple((e, final.score(e, per_scene=False)[0]) for e in ends)
@@ -318,7 +322,8 @@ def _grid_starts(run: "_Run", seed: Extrinsic, part: tuple[float, float] = (0.0,
     ends = []
     step = (part[1] - part[0]) / len(starts)
     for i, start in enumerate(starts):
-        x, value = run.climb_objective(obj, 1, start, part=(part[0] + i * step, part[0] + (i + 1) * step))
+        x, value = run.climb_objective(obj, 1, start, part=(part[0] + i * step, part[0] + (i + 1) * step),
+                                       phase=f"grid start {i + 1}/{len(starts)}")
         if run.cancelled:
             return []
         ends.append((value, obj.extrinsic(x)))
@@ -347,9 +352,9 @@ class _Run:
         self.ends: tuple[tuple[Extrinsic, float], ...] = ()  # every start's end and final score
 
     def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0,
-              part: tuple[float, float] = (0.0, 1.0)) -> Extrinsic:
+              part: tuple[float, float] = (0.0, 1.0), phase: str = "") -> Extrinsic:
         """Climb ``stages`` (numbered from ``first``) from ``start``, the progress reported
-        across ``part`` of the whole search; the best point reached."""
+        across ``part`` of the whole search as ``phase``; the best point reached."""
         current = start
         lo, step = part[0], (part[1] - part[0]) / max(len(stages), 1)
         for i, stage in enumerate(stages):
@@ -362,18 +367,18 @@ class _Run:
                 self.cancelled, self.message = True, "cancelled"
                 break
             obj = prepared.objective(self.seed, start=current, max_points=stage.max_points)
-            current = obj.extrinsic(self.climb_objective(obj, k, part=(lo + i * step, lo + (i + 1) * step))[0])
+            current = obj.extrinsic(self.climb_objective(obj, k, part=(lo + i * step, lo + (i + 1) * step), phase=phase)[0])
             if self.cancelled:
                 break
         return current
 
     def climb_objective(self, obj: MapObjective, k: int, start: np.ndarray | None = None,
-                        part: tuple[float, float] = (0.0, 1.0)) -> tuple[np.ndarray, float]:
+                        part: tuple[float, float] = (0.0, 1.0), phase: str = "") -> tuple[np.ndarray, float]:
         """Climb ``obj`` as stage ``k`` from the correction ``start`` (default: the objective's
-        own start), the progress reported across ``part`` of the search; the best correction
-        reached and its value (the best so far once cancelled)."""
+        own start), the progress reported across ``part`` of the search as ``phase``; the best
+        correction reached and its value (the best so far once cancelled)."""
         tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
-                           self.count, self.history, start, part)
+                           self.count, self.history, start, part, phase)
         try:
             res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
             self.message = str(res.message)
@@ -394,12 +399,12 @@ class _Tracker:
     TYPICAL_EVALUATIONS = 25.0
 
     def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history,
-                 start: np.ndarray | None = None, part: tuple[float, float] = (0.0, 1.0)):
+                 start: np.ndarray | None = None, part: tuple[float, float] = (0.0, 1.0), phase: str = ""):
         self.obj, self.scale, self.free = obj, scale, free
         self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count, self.history = count, history
-        self.part = part
+        self.part, self.phase = part, phase
         self.start_count = count
         self.fixed = (obj.start if start is None else np.asarray(start, float)).copy()
         self.best_mi = -np.inf
@@ -434,6 +439,7 @@ class _Tracker:
                     best=self.obj.extrinsic(self.best_delta),
                     fraction=self.part[0] + (self.part[1] - self.part[0]) * done,
                     elapsed=time.perf_counter() - self.t0,
+                    phase=self.phase,
                 )
             )
 

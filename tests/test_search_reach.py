@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from l2e_studio.calibrate import CalibrationSettings, calibrate, refine, stack_scenes
+from l2e_studio.calibrate import CalibrationSettings, calibrate, grid_rotations, refine, stack_scenes
 from l2e_studio.objective import SceneStack
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -97,15 +97,23 @@ def test_the_progress_of_a_global_search_never_runs_backwards(small_synth) -> No
     settings = CalibrationSettings(objective="edges")
     stack = stack_scenes(scenes, camera, truth, settings)
     seed = truth.perturbed(np.array([0.05, 0.0, 0.0]), np.radians([2.0, 0.0, 1.0]))
-    fractions, stages = [], set()
+    fractions, stages, phases = [], set(), []
 
     def on_progress(p) -> None:
         fractions.append(p.fraction)
         stages.add(p.stage)
+        if not phases or phases[-1] != p.phase:
+            phases.append(p.phase)
 
     result = calibrate(stack, None, seed, settings, on_progress=on_progress)
     assert len(fractions) == result.evaluations and stages == set(range(len(settings.stages_for(stack))))
     assert np.all(np.diff(fractions) >= 0) and fractions[0] < 0.01 and 0.9 < fractions[-1] <= 1.0
+    # what the bar is doing says so, in order: each of the grid's starts, then each climb (the
+    # stage number alone went 2 through the grid, then back to 1)
+    n = len(grid_rotations())
+    climbs = [p for p in phases if p.startswith("climb")]
+    assert phases[:n] == [f"grid start {i}/{n}" for i in range(1, n + 1)]
+    assert phases[n:] == climbs == [f"climb {j}/{len(climbs)}" for j in range(1, len(climbs) + 1)] and len(climbs) >= 3
 
 
 def test_the_best_of_pure_noise_over_a_box_seldom_passes_the_significance_ceiling() -> None:

@@ -138,7 +138,8 @@ class Runner:
         stage = [-1]
 
         def on_progress(p: Progress) -> None:
-            app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages)
+            app.state.record_progress(run_id, p.evaluations, p.mi, p.best_mi, p.best, p.fraction, p.stage, p.stages,
+                                     p.phase)
             if p.stage != stage[0]:  # every stage (and start) begins with a point on the curve
                 stage[0] = p.stage
                 self._ask_curve_point(p.best, p.evaluations)

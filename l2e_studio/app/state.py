@@ -31,6 +31,7 @@ class RunState:
     fraction: float = 0.0
     stage: int = 0
     stages: int = 0
+    phase: str = ""  # which climb of a multi-start search (calibrate.Progress.phase)
     mi: float = float("nan")
     best_mi: float = float("nan")
     best: Extrinsic | None = None
@@ -215,7 +216,7 @@ class SessionState:
 
     def record_progress(
         self, run_id: int, evaluations: int, mi: float, best_mi: float, best: Extrinsic,
-        fraction: float, stage: int = 0, stages: int = 1,
+        fraction: float, stage: int = 0, stages: int = 1, phase: str = "",
     ) -> bool:
         """Add one evaluation to the running run; False (ignored) if ``run_id`` is stale."""
         with self._lock:
@@ -231,6 +232,7 @@ class SessionState:
                 fraction=float(np.clip(fraction, 0.0, 1.0)),
                 stage=int(stage),
                 stages=int(stages),
+                phase=str(phase),
                 history=self.run.history + (row,),
             )
             self._bump()

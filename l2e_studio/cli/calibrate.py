@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
 
         def on_progress(p) -> None:
             prog.update(task, completed=p.fraction,
-                        description=f"stage {p.stage + 1}/{p.stages}  eval {p.evaluations:4d}  {stack.objective_name} {p.best_mi:.5f}")
+                        description=(f"{p.phase}  " if p.phase else "") + f"stage {p.stage + 1}/{p.stages}  eval {p.evaluations:4d}  {stack.objective_name} {p.best_mi:.5f}")
 
         result = calibrate(stack, None, seed, settings, on_progress=on_progress)
         prog.update(task, completed=1.0)

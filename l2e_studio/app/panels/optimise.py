@@ -201,7 +201,7 @@ class OptimisePanel:
                     f"{j.label} · {j.elapsed:.1f} s  \n{scored}")
         else:
             self.progress.value = float(np.clip(100.0 * run.fraction, 0.0, 100.0))
-            stage = f"stage {run.stage + 1}/{run.stages} · " if run.stages else ""
+            stage = (f"{run.phase} · " if run.phase else "") + (f"stage {run.stage + 1}/{run.stages} · " if run.stages else "")
             text = (f"{head} · {stage}{run.evaluations} evaluations · {elapsed:.1f} s  \n{scored}  \n"
                     f"<small>this stage's own objective, {self.app.run_label()} (its smoothing, its points; "
                     f"not comparable across stages): {score_num(run.mi)}, best {score_num(run.best_mi)}</small>")
