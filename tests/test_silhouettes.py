@@ -56,10 +56,13 @@ def test_a_lone_dropout_is_no_edge_and_a_cloud_cut_to_a_sector_has_no_edge_at_it
     ranges[np.argmin(np.abs(az - 10.0))] = np.nan  # one pulse lost on a plain wall
     w = weights_by_azimuth(ring_scan(az, ranges))
     assert max(w.values()) < edges.MIN_WEIGHT
-    # the same wall cut to a camera's view of 60 deg: its ends are where the data stops, not silhouettes
+    # the same wall cut to a camera's view of 60 deg: its ends are where the data stops, not
+    # silhouettes; nor where the file keeps its lost returns as zeros (an organised cloud)
     sector = (az > -30) & (az < 30)
-    w = weights_by_azimuth(ring_scan(az[sector], np.full(sector.sum(), 8.0)))
-    assert max(w.values()) < edges.MIN_WEIGHT
+    cut = ring_scan(az[sector], np.full(sector.sum(), 8.0))
+    for cloud in (cut, np.vstack([cut, np.zeros((500, 3))])):
+        w = weights_by_azimuth(cloud)
+        assert max(w.values()) < edges.MIN_WEIGHT
 
 
 def test_a_lidar_that_looks_up_at_the_sky_finds_its_peak_at_the_truth() -> None:

@@ -111,7 +111,7 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
     jump = np.maximum(dl, dr) - np.maximum(0.0, -np.minimum(dl, dr))
     jump = np.where(both, jump, 0.0)
     w_depth = np.clip(jump / (DEPTH_JUMP_M + DEPTH_JUMP_REL * r), 0.0, 1.0)
-    w_depth[silhouettes(az, gap_l, gap_r)] = 1.0
+    w_depth[silhouettes(np.where(ok, az, np.nan), gap_l, gap_r)] = 1.0
 
     inten = np.asarray(intensity, dtype=np.float64)
     l2, has_l2, _ = nearest(left, 1)
@@ -130,23 +130,29 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
 
 def silhouettes(az: np.ndarray, gap_l: np.ndarray, gap_r: np.ndarray) -> np.ndarray:
     """(N,) bool: points beside a gap of missing returns along the scan (:data:`GAP_STEPS`), given
-    each point's azimuth (rad) and the azimuth offsets of its nearest horizontal neighbours to the
-    left and right (inf where none)."""
+    each point's azimuth (rad; nan for a point without a direction) and the azimuth offsets of its
+    nearest horizontal neighbours to the left and right (inf where none)."""
     near, far = np.minimum(gap_l, gap_r), np.maximum(gap_l, gap_r)
     steps = near[np.isfinite(near)]
     if steps.size == 0:
         return np.zeros(az.shape, dtype=bool)
     step = float(np.median(steps))
     gap = np.isfinite(near) & (near <= GAP_NEAR * step) & (far > GAP_STEPS * near)
+    gap &= np.isfinite(az)
     side = np.where(gap_l > gap_r, -1.0, 1.0)
-    past = np.floor((np.degrees(az) + side * GAP_COVER_DEG) % 360.0).astype(np.int64) % 360
-    return gap & ~outside_arc(az)[past]
+    past = _degree_bins(np.where(gap, az, 0.0) + side * np.radians(GAP_COVER_DEG))
+    return gap & ~outside_arc(az[np.isfinite(az)])[past]
+
+
+def _degree_bins(az: np.ndarray) -> np.ndarray:
+    """Each azimuth's (rad) 1 deg bin, 0..359."""
+    return np.floor(np.degrees(az) % 360.0).astype(np.int64) % 360
 
 
 def outside_arc(az: np.ndarray) -> np.ndarray:
     """(360,) bool per 1 deg of azimuth: the widest arc without a point, where wider than
     :data:`GAP_OUTSIDE_DEG` (outside a cloud cut to a sector); all False for a scan all round."""
-    empty = np.bincount(np.floor(np.degrees(az) % 360.0).astype(np.int64) % 360, minlength=360) == 0
+    empty = np.bincount(_degree_bins(az), minlength=360) == 0
     out = np.zeros(360, dtype=bool)
     if empty.all() or not empty.any():
         return out
