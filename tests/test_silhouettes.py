@@ -41,10 +41,10 @@ def test_an_object_against_the_sky_has_its_silhouette_as_edges() -> None:
     w = weights_by_azimuth(ring_scan(az, ranges))
     post = [a for a in w if -5.05 < a < 5.05]
     for a in (min(post), max(post)):  # the post's two sides, each against the sky
-        assert w[a] == 1.0
+        assert w[a] == edges.SILHOUETTE_WEIGHT
     wall = [a for a in w if not -20 < a < 20]
     for a in (max(a for a in wall if a < 0), min(a for a in wall if a > 0)):  # the wall's ends at the sky
-        assert w[a] == 1.0
+        assert w[a] == edges.SILHOUETTE_WEIGHT
     inside = [a for a in post if min(post) < a < max(post)]
     assert max(w[a] for a in inside) < edges.MIN_WEIGHT  # the post's face is no edge
     assert max(w[a] for a in wall if a < -25 or a > 25) < edges.MIN_WEIGHT

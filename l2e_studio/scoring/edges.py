@@ -7,7 +7,7 @@ brightness edges in the image. This module holds both sides of that score:
 
 * :func:`lidar_edge_weights`: per point, how strongly it sits on a foreground depth edge or an
   intensity step, or whether it is a silhouette against missing returns (the sky; stop 43: on
-  the synthetic OS1-128, whose upper beams see sky, the truth went from 7 to 27 deviations above
+  the synthetic OS1-128, whose upper beams see sky, the truth went from 7 to 19 deviations above
   the far field), measured against its nearest horizontal neighbour on either side in the scan
   (neighbours found by direction with a k-d tree, so any scan pattern works: spinning, MEMS,
   cropped or unordered). A slope is no edge: a wall seen at a grazing angle changes range
@@ -51,6 +51,12 @@ GAP_NEAR = 2.0
 #: ``GAP_OUTSIDE_DEG`` (no sky gap spans that much at every elevation), and its ends are no silhouettes.
 GAP_COVER_DEG = 2.0
 GAP_OUTSIDE_DEG = 90.0
+#: A silhouette's weight (a full depth edge's is 1). Half: silhouettes are mostly far (a skyline), which
+#: pins the rotation and not the translation; at full weight KITTI odometry's halves climbed back
+#: along the forward axis to 1.6 cm instead of 0.5 (its translation no longer trusted), at half weight
+#: to 0.5 cm, while the synthetic OS1-128's truth still stands 19 deviations above its far field (7
+#: without silhouettes, 27 at full weight; benchmarks/results/realdata.md, stop 43).
+SILHOUETTE_WEIGHT = 0.5
 #: An intensity step of this many grey levels (of 255, scaled to the scan's own 5-95 % spread) gives full weight.
 INTENSITY_STEP = 60.0
 #: Points lighter than this are no edge at all (and are left out of the objective).
@@ -72,7 +78,7 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
     a depth edge when it is in front of one side (occlusion: only the foreground point, which
     the camera sees at the boundary) without the other side falling away as much; a thin pole
     in front of both sides is an edge too. A point beside a gap in the scan, where no return came
-    back (sky, a surface beyond the range or too dark), is a silhouette and gets full weight: an
+    back (sky, a surface beyond the range or too dark), is a silhouette (:data:`SILHOUETTE_WEIGHT`): an
     object against the sky has no farther neighbour to jump to, and those are the edges an
     upward-looking lidar sees most of (:data:`GAP_STEPS`). Intensity steps are measured between the means of
     the two nearest points on either side and scaled to the scan's own spread and neighbour
@@ -111,7 +117,8 @@ def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
     jump = np.maximum(dl, dr) - np.maximum(0.0, -np.minimum(dl, dr))
     jump = np.where(both, jump, 0.0)
     w_depth = np.clip(jump / (DEPTH_JUMP_M + DEPTH_JUMP_REL * r), 0.0, 1.0)
-    w_depth[silhouettes(np.where(ok, az, np.nan), gap_l, gap_r)] = 1.0
+    edge = silhouettes(np.where(ok, az, np.nan), gap_l, gap_r)
+    w_depth[edge] = np.maximum(w_depth[edge], SILHOUETTE_WEIGHT)
 
     inten = np.asarray(intensity, dtype=np.float64)
     l2, has_l2, _ = nearest(left, 1)
