@@ -108,10 +108,12 @@ def test_the_static_dev_rigs_are_one_place_and_the_drive_is_ten(name: str, n_pla
 @pytest.mark.realdata
 def test_a_static_rig_hands_back_nothing_worse_than_its_seed_from_the_peak_its_scenes_share() -> None:
     """LCECalib rlfs01 (18 scenes of one courtyard, a board carried about before a static rig),
-    from bench_realdata.py's third 2 deg / 10 cm seed: the optimiser ends 2.0 deg / 20 cm off, at a
+    from bench_realdata.py's fourth 2 deg / 10 cm seed: the optimiser ends 2.1 deg / 23 cm off, at a
     peak that scores as high as the reference. Counted as 18 places, every check of the scenes
     against each other passed there and the verdict trusted it whole; as one place it takes no
-    translation from them, and the rotation alone fails its checks: the seed is kept."""
+    translation from them, and the rotation alone fails its checks: the seed is kept. (Until stop 43
+    the third seed ended there too; with silhouettes against the sky in the edge score it ends 0.8
+    deg / 2.7 cm off, as do the first, second, fifth and sixth.)"""
     rigs = load_rigs(["lcecalib_rlfs01"])
     if not rigs:
         pytest.skip("../shared/realdata is absent")
@@ -119,7 +121,7 @@ def test_a_static_rig_hands_back_nothing_worse_than_its_seed_from_the_peak_its_s
 
     rig = rigs[0]
     settings = CalibrationSettings()
-    seed = rig.reference.perturbed(*perturbations(20, 2.0, 0.10, 1001)[2])
+    seed = rig.reference.perturbed(*perturbations(20, 2.0, 0.10, 1001)[3])
     stack = stack_scenes(rig.scenes, rig.camera, seed, settings)
     assert stack.n_places == 1
     result = calibrate(stack, None, seed, settings)
