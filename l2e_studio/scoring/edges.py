@@ -53,8 +53,8 @@ GAP_COVER_DEG = 2.0
 GAP_OUTSIDE_DEG = 90.0
 #: A silhouette's weight (a full depth edge's is 1). Half: silhouettes are mostly far (a skyline), which
 #: pins the rotation and not the translation; at full weight KITTI odometry's halves climbed back
-#: along the forward axis to 1.6 cm instead of 0.5 (its translation no longer trusted), at half weight
-#: to 0.5 cm, while the synthetic OS1-128's truth still stands 19 deviations above its far field (7
+#: along the forward axis to 1.6 cm instead of 0.7 (its translation no longer trusted), at half weight
+#: to 0.6 cm, while the synthetic OS1-128's truth still stands 19 deviations above its far field (7
 #: without silhouettes, 27 at full weight; benchmarks/results/realdata.md, stop 43).
 SILHOUETTE_WEIGHT = 0.5
 #: An intensity step of this many grey levels (of 255, scaled to the scan's own 5-95 % spread) gives full weight.
@@ -165,8 +165,8 @@ def outside_arc(az: np.ndarray) -> np.ndarray:
         return out
     start = int(np.argmin(empty))  # an occupied bin: runs of empty bins after it do not wrap
     ring = np.roll(empty, -start)
-    edges_ = np.flatnonzero(np.diff(np.r_[0, ring.astype(np.int8), 0]))
-    runs = edges_.reshape(-1, 2)  # [first, last + 1) of each empty run
+    bounds = np.flatnonzero(np.diff(np.r_[0, ring.astype(np.int8), 0]))
+    runs = bounds.reshape(-1, 2)  # [first, last + 1) of each empty run
     first, stop = max(runs, key=lambda ab: ab[1] - ab[0])
     if stop - first > GAP_OUTSIDE_DEG:
         out[(np.arange(first, stop) + start) % 360] = True
