@@ -140,7 +140,7 @@ class Progress:
     best: Extrinsic
     fraction: float  # 0..1, a rough share of the work done
     elapsed: float  # seconds
-    #: which climb of a multi-start search this is ("grid start 12/56", "climb 2/4"; "" for one climb):
+    #: which climb of a multi-start search this is ("grid start 12/56", "climb 3/6"; "" for one climb):
     #: the grid's starts all climb the middle stage, and each later climb begins its stages again
     phase: str = ""
 

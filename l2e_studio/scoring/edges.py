@@ -144,11 +144,11 @@ def silhouettes(az: np.ndarray, gap_l: np.ndarray, gap_r: np.ndarray) -> np.ndar
     if steps.size == 0:
         return np.zeros(az.shape, dtype=bool)
     step = float(np.median(steps))
-    gap = np.isfinite(near) & (near <= GAP_NEAR * step) & (far > GAP_STEPS * near)
-    gap &= np.isfinite(az)
+    aimed = np.isfinite(az)
+    gap = aimed & np.isfinite(near) & (near <= GAP_NEAR * step) & (far > GAP_STEPS * near)
     side = np.where(gap_l > gap_r, -1.0, 1.0)
     past = _degree_bins(np.where(gap, az, 0.0) + side * np.radians(GAP_COVER_DEG))
-    return gap & ~outside_arc(az[np.isfinite(az)])[past]
+    return gap & ~outside_arc(az[aimed])[past]
 
 
 def _degree_bins(az: np.ndarray) -> np.ndarray:
