@@ -53,8 +53,9 @@ MIN_STEP_DOWN = 1.5
 #: two (stop 43): from a 5 deg / 20 cm seed of the synthetic HDL-64E the grid's third end is the
 #: truth, and with two the search ended on a side peak scoring a third of it, trusted 22.5 cm off.
 GRID_STEP_DEG, GRID_RADIUS_DEG, GRID_POINTS, GRID_STARTS, GRID_APART_DEG = 2.5, 5.6, 10_000, 4, 1.0
-#: The share of a global search's progress its grid climbs take (about their share of the time).
-GRID_SHARE = 0.5
+#: The shares of a global search's progress the seed's two climbs and the grid's climbs take (about
+#: their shares of the time); the climbs from the grid's ends take the rest.
+SEED_SHARE, GRID_SHARE = 0.25, 0.5
 
 
 @dataclass(frozen=True)
@@ -136,12 +137,16 @@ class Progress:
     stage: int  # 0-based
     stages: int
     mi: float  # objective value of this evaluation (the stage's smoothing)
-    best_mi: float  # best objective value in this stage
+    best_mi: float  # best objective value of this climb in this stage
+    #: the search's best point so far: this climb's, or in a multi-start search once a climb has
+    #: finished, the best finished climb's end on the final score (a climb under way, or the
+    #: grid's on thinned points, is not comparable with it)
     best: Extrinsic
     fraction: float  # 0..1, a rough share of the work done
     elapsed: float  # seconds
-    #: which climb of a multi-start search this is ("grid start 12/56", "climb 3/6"; "" for one climb):
-    #: the grid's starts all climb the middle stage, and each later climb begins its stages again
+    #: which climb of a multi-start search this is ("seed climb 1/2", "grid start 12/56", "climb from
+    #: grid end 3/4"; "" for one climb): the grid's starts all climb the middle stage, and each
+    #: other climb begins its stages again
     phase: str = ""
 
 
@@ -269,17 +274,26 @@ def _search(stack, seed, settings, on_progress, cancel, t0) -> "_Run":
     run = _Run(stack, seed, settings, scale, free, stages, on_progress, cancel, t0)
     if _global_search(settings, stack) and len(stages) > 1:
         # the seed climbs every stage and, as a seed already in the fine basin should not be
-        # dragged to a side peak of the coarsest blur, every stage but the coarsest; the grid's
-        # best ends climb on from the middle stage; the final score picks the answer
+        # dragged to a side peak of the coarsest blur, every stage but the coarsest; then the
+        # grid's best ends climb on from the middle stage; the final score picks the answer.
+        # The seed's climbs run first, so that the search's best point is theirs while the grid
+        # explores poses degrees away (what a user watching the overlay expects to see).
         final = stack.with_sigma(settings.sigma)
-        climbs = [(seed, 0), (seed, 1)] + [(start, 1) for start in _grid_starts(run, seed, (0.0, GRID_SHARE))]
-        ends, step = [], (1.0 - GRID_SHARE) / len(climbs)
-        for j, (start, first) in enumerate(climbs):
-            ends.append(run.climb(start, stages[first:], first=first, part=(GRID_SHARE + j * step, GRID_SHARE + (j + 1) * step),
-                                  phase=f"climb {j + 1}/{len(climbs)}"))
+        explore = bool(free[3:].all())  # (no grid with the rotation held)
+        seed_share = SEED_SHARE if explore else 1.0
+        for j, first in enumerate((0, 1)):
+            run.finish(run.climb(seed, stages[first:], first=first, part=(j * seed_share / 2, (j + 1) * seed_share / 2),
+                                 phase=f"seed climb {j + 1}/2"), final)
             if run.cancelled:
                 break
-        run.ends = tuple((e, final.score(e, per_scene=False)[0]) for e in ends)
+        starts = _grid_starts(run, seed, (seed_share, seed_share + GRID_SHARE)) if explore and not run.cancelled else []
+        lo = seed_share + GRID_SHARE
+        step = (1.0 - lo) / max(len(starts), 1)
+        for j, start in enumerate(starts):
+            run.finish(run.climb(start, stages[1:], first=1, part=(lo + j * step, lo + (j + 1) * step),
+                                 phase=f"climb from grid end {j + 1}/{len(starts)}"), final)
+            if run.cancelled:
+                break
         run.end = max(run.ends, key=lambda es: es[1])[0]
     else:
         run.end = run.climb(seed, stages)
@@ -352,6 +366,14 @@ class _Run:
         self.message = ""
         self.end = seed  # where the search ended (set by _search)
         self.ends: tuple[tuple[Extrinsic, float], ...] = ()  # every start's end and final score
+        #: the best finished climb's end of a multi-start search (None before the first has
+        #: finished): the progress's best point, as a climb under way does not compare with it
+        self.leader: Extrinsic | None = None
+
+    def finish(self, end: Extrinsic, final: SceneStack) -> None:
+        """Record the end of one climb of a multi-start search, scored on ``final``."""
+        self.ends += ((end, final.score(end, per_scene=False)[0]),)
+        self.leader = max(self.ends, key=lambda es: es[1])[0]
 
     def climb(self, start: Extrinsic, stages: Sequence[Stage], first: int = 0,
               part: tuple[float, float] = (0.0, 1.0), phase: str = "") -> Extrinsic:
@@ -380,7 +402,7 @@ class _Run:
         own start), the progress reported across ``part`` of the search as ``phase``; the best
         correction reached and its value (the best so far once cancelled)."""
         tracker = _Tracker(obj, self.scale, self.free, k, self.n_stages, self.on_progress, self.cancel, self.t0,
-                           self.count, self.history, start, part, phase)
+                           self.count, self.history, start, part, phase, self.leader)
         try:
             res = _run_stage(obj, tracker, self.settings, final=k == self.n_stages - 1)
             self.message = str(res.message)
@@ -401,8 +423,10 @@ class _Tracker:
     TYPICAL_EVALUATIONS = 25.0
 
     def __init__(self, obj: MapObjective, scale, free, stage, stages, on_progress, cancel, t0, count, history,
-                 start: np.ndarray | None = None, part: tuple[float, float] = (0.0, 1.0), phase: str = ""):
+                 start: np.ndarray | None = None, part: tuple[float, float] = (0.0, 1.0), phase: str = "",
+                 leader: Extrinsic | None = None):
         self.obj, self.scale, self.free = obj, scale, free
+        self.leader = leader
         self.stage, self.stages = stage, stages
         self.on_progress, self.cancel, self.t0 = on_progress, cancel, t0
         self.count, self.history = count, history
@@ -438,7 +462,7 @@ class _Tracker:
                     stages=self.stages,
                     mi=mi,
                     best_mi=self.best_mi,
-                    best=self.obj.extrinsic(self.best_delta),
+                    best=self.leader or self.obj.extrinsic(self.best_delta),
                     fraction=self.part[0] + (self.part[1] - self.part[0]) * done,
                     elapsed=time.perf_counter() - self.t0,
                     phase=self.phase,
