@@ -215,6 +215,9 @@ def export_status(result: dict | None) -> tuple[str, list[str]]:
         else:
             lines.append("translation: the SEED's translation, not calibrated (these scenes do not pin it down); "
                          "only the rotation was calibrated and checked")
+        lever = v.get("rotation_per_cm_of_seed_translation")
+        if isinstance(lever, dict) and isinstance(lever.get("note"), str):
+            lines.append(lever["note"])
     if status in ("trusted", "trusted-rotation") and isinstance(v.get("within_spread"), dict):
         lines.append("within the result's own spread the SEED's values stand: " + str(v["within_spread"].get("note", "")))
     if status == "not-trusted":

@@ -51,6 +51,8 @@ from .evidence import (RETURN_M, JudgeProgress, JudgingCancelled, Spread, Steps,
 from .geometry import Extrinsic
 from .objective import SceneStack
 from .peaks import far_climbs, rival_check
+from .pinning import (AXIS_ADVICE, LEVER_TARGET_DEG, OBSERVABLE_DROP, PROBE_M, AxisPinned, rotation_lever,
+                      translation_axes, translation_drops)
 from .scoring.edges import scan_line_spacing_deg
 from .verdict_check import Check
 
@@ -62,24 +64,12 @@ __all__ = ["AXIS_ADVICE", "ON_UNTRUSTED", "ROTATION_ADVICE", "SEVERAL_PEAKS", "S
 
 STATUSES = ("trusted", "trusted-rotation", "not-trusted")
 ON_UNTRUSTED = ("keep-seed", "mark")
-PROBE_M = 0.05  # translation probes: the score must drop when the result moves this far along each axis ...
-#: ... by at least this share of its value, or that axis is not pinned down. Per objective: the
-#: edge score is zero-mean by construction (band-passed map), so its relative changes read
-#: directly; the MI carries a large pose-independent part (the marginal entropies), which
-#: compresses them (synthetic scenes whose translation is recovered to 2 mm lose 5 % over 5 cm).
-OBSERVABLE_DROP = {"edges": 0.1, "mi": 0.02}
 REFIT_BOUND_DEG = 1.0  # rotation re-fitted to the seed's translation stays this close to the checked one
 #: A move from the seed is handed back only where it exceeds this many times the spread of the
 #: independent estimates (each half refined alone, the second start): a smaller move cannot be
 #: told from the estimate's own scatter, and the seed stands (a released calibration checked
 #: again is confirmed, not nudged by noise).
 SIGNIFICANT = 2.0
-#: Per camera axis: what moves its translation, and what to record when the scenes do not pin it.
-AXIS_ADVICE = {
-    "x": "add scenes with near objects (a few metres) whose vertical edges stand in front of a far background",
-    "y": "add scenes with near objects whose top or bottom edges are in view (a table, a car's roof at a few metres)",
-    "z": "add scenes with near objects at the image's left and right edges",
-}
 #: Per family of checks that can fail a rotation (the re-fit's "(rotation only)" ones share their
 #: family's line): what it means, and what to record or do (the Seed and Target tabs are the
 #: app's). Read off the dev rigs whose rotation is not trusted (realdata.md): on the 16-beam street
@@ -156,6 +146,10 @@ class Verdict:
     scan_lines: tuple[float, float] = (float("nan"), float("nan"))
     #: how many places the scenes show (:mod:`l2e_studio.places`; 0: not counted)
     places: int = 0
+    #: where the translation handed back is the seed's along x or y (``trusted-rotation``): how
+    #: far (deg) the rotation turns for each cm that translation is off sideways
+    #: (:func:`l2e_studio.pinning.rotation_lever`); nan otherwise
+    lever: float = float("nan")
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -215,6 +209,16 @@ class Verdict:
                 "" if np.isnan(a.returned) else f"; the halves climb back to within {100 * a.returned:.1f} cm") + ")"
             for a in axes)
 
+    def lever_line(self) -> str:
+        """Where the rotation is paired with the seed's translation: what an error in that
+        translation does to it, and how well to measure it ("" otherwise)."""
+        axes = ", ".join(a for a in "xy" if a in self.seed_axes)
+        if self.status != "trusted-rotation" or not axes or not np.isfinite(self.lever) or self.lever <= 0:
+            return ""
+        return (f"the rotation is paired with the seed's translation along {axes}: each cm that is off turns the best "
+                f"rotation by about {self.lever:.2f} deg at these scenes' depths; measure the translation to within "
+                f"{LEVER_TARGET_DEG / self.lever:.1f} cm (a tape, the rig's drawing) for {LEVER_TARGET_DEG:g} deg")
+
     def rotation_advice(self) -> list[str]:
         """Where the rotation is not trusted: one line per family of its failed checks, what it
         means and what to record or do (:data:`ROTATION_ADVICE`); [] otherwise."""
@@ -237,9 +241,10 @@ class Verdict:
     def lines(self) -> list[str]:
         """The summary, one indented line per reason, what pins the translation, then what to record
         (for a terminal)."""
-        pinned = self.pinned()
+        pinned, lever = self.pinned(), self.lever_line()
         return ([f"verdict: {self.summary()}"] + [f"  - {r}" for r in self.reasons]
-                + ([f"  = {pinned}"] if pinned else []) + [f"  > {a}" for a in self.advice()])
+                + ([f"  = {pinned}"] if pinned else []) + ([f"  > {lever}"] if lever else [])
+                + [f"  > {a}" for a in self.advice()])
 
     def to_dict(self) -> dict:
         pinned = self.pinned()
@@ -255,6 +260,8 @@ class Verdict:
             "reasons": list(self.reasons),
             "checks": {c.name: {"passed": c.passed, "detail": c.detail} for c in self.checks},
             **({"translation_pinned": pinned} if pinned else {}),
+            **({"rotation_per_cm_of_seed_translation": {"deg": round(self.lever, 4), "note": lever}}
+               if (lever := self.lever_line()) else {}),
             **({"rotation_advice": rotation} if (rotation := self.rotation_advice()) else {}),
             **({"scan_line_spacing": {"deg": round(self.scan_lines[0], 3), "px_at_centre": round(self.scan_lines[1], 1)}}
                if np.isfinite(self.scan_lines[0]) else {}),
@@ -321,71 +328,6 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
                      "the seed stands whole")
         out, keep_rot, keep_t = seed, True, mine
     return out, bool(keep_rot), "".join(a for a, k in zip("xyz", keep_t) if k), "; ".join(parts)
-
-
-@dataclass(frozen=True)
-class AxisPinned:
-    """Whether the scenes pin the translation along one camera axis: the share of the score lost
-    by moving ``PROBE_M`` along it (the smaller side), against the objective's need, or, where the
-    peak is broader than that, both halves of the scenes climbing back to it (``returned``: how
-    far from the result the worst of them ended, m; nan where not tried); never from one place
-    (``one_place``: one scene, or ``scenes`` scenes of a rig that did not move; see
-    :func:`translation_axes`)."""
-
-    axis: str  # "x", "y" or "z" (camera frame: right, down, forward)
-    pinned: bool
-    drop: float
-    one_place: bool = False
-    returned: float = float("nan")
-    scenes: int = 1
-
-    def line(self) -> str:
-        state = "pinned" if self.pinned else "not pinned"
-        text = f"{self.axis} is {state} (moving {100 * PROBE_M:.0f} cm costs {100 * self.drop:.0f} % of the score"
-        advice = AXIS_ADVICE[self.axis]
-        if self.one_place and self.scenes >= 2:
-            text += f", but all {self.scenes} scenes show one place, and one place cannot pin a translation"
-            advice = f"move the rig between scenes to record other places; {advice}"
-        elif self.one_place:
-            text += ", but one scene cannot pin a translation"
-        elif not np.isnan(self.returned):
-            text += (f"; each half of the scenes, moved {100 * PROBE_M:.0f} cm either way, climbs back to within "
-                     f"{100 * self.returned:.1f} cm" if self.pinned else
-                     f", and a half of the scenes moved {100 * PROBE_M:.0f} cm along it ends "
-                     f"{100 * self.returned:.1f} cm from the result")
-        return f"{text})" if self.pinned else f"{text}): {advice}"
-
-
-def translation_axes(drops: np.ndarray, objective: str, n_places: int,
-                     returned: np.ndarray | None = None, n_scenes: int | None = None) -> tuple[AxisPinned, ...]:
-    """Per camera axis, whether :func:`translation_drops` shows the scenes pin it, or (where the
-    drop is short of the objective's need) ``returned`` does: the halves of the places climbing
-    back to within ``RETURN_M`` from ``PROBE_M`` either way (:func:`l2e_studio.evidence.climbs_back`;
-    nan: not tried).
-
-    One place pins none, be it one scene or ``n_scenes`` scenes of a rig that did not move
-    (:mod:`l2e_studio.places`). One scene's probe moves the translation with the rotation held,
-    and a rotation of a few tenths of a degree gives most of that score back; its halves (strips
-    of one image) share its structure, so they agree on its bias. On the single-scan dev rigs
-    results whose checks all passed were 3-25 cm off along axes that cost 20-47 % of the score
-    (OpenCalib manual: x 5-7 cm off at a 46 % drop, 7 % with the rotation re-fitted), and one scan
-    climbed back along z to a translation 8 cm off (OpenCalib 3). Scenes of one place are that
-    one scene again: on LCECalib's static rig a result 20 cm off passed every check of its 18."""
-    need = OBSERVABLE_DROP[objective]
-    one = n_places < 2
-    scenes = n_places if n_scenes is None else n_scenes
-    returned = np.full(3, np.nan) if returned is None else np.asarray(returned, dtype=float)
-    return tuple(AxisPinned(axis, bool(d >= need or r <= RETURN_M) and not one, float(d), one, float(r), scenes)
-                 for axis, d, r in zip("xyz", drops, returned))
-
-
-def translation_drops(stack: SceneStack, res: Extrinsic, at_res: float) -> np.ndarray:
-    """(3,) the share of the score lost by moving ``PROBE_M`` either way along x, y and z (the
-    smaller of the two sides): a flat axis loses ~0, a pinned one a good part of its score."""
-    moved = stack.scores([res.perturbed(sign * PROBE_M * np.eye(3)[k], np.zeros(3)) for k in range(3)
-                          for sign in (-1.0, 1.0)])
-    worst = moved.reshape(3, 2).max(axis=1)
-    return (at_res - worst) / abs(at_res) if at_res != 0 else np.zeros(3)
 
 
 def judge(
@@ -458,9 +400,10 @@ def judge(
         # it to the seed at all?
         spread = replace(spread, rise=rise)
         out, seed_rot, settled_axes, settled = settle(seed, handed, seed_axes, spread, sides)
+        sideways = status == "trusted-rotation" and set(seed_axes) & set("xy")
         return Verdict(status, out, False, reasons if status != "trusted" else (), all_checks,
                        time.perf_counter() - t0, axes, seed_axes, spread, seed_rot, settled_axes, settled,
-                       places=final.n_places)
+                       places=final.n_places, lever=rotation_lever(final, out) if sideways else float("nan"))
 
     if not failed:
         return trusted("trusted", res, "", tuple(checks), spread)
@@ -545,4 +488,4 @@ def with_check(verdict: Verdict, check: Check, seed: Extrinsic, on_untrusted: st
     keep = on_untrusted == "keep-seed"
     return replace(verdict, status="not-trusted", extrinsic=seed if keep else verdict.extrinsic, kept_seed=keep,
                    reasons=verdict.reasons + (f"{check.name}: {check.detail}",), checks=checks, seed_axes="xyz",
-                   seed_rotation=False, settled_axes="", settled="")
+                   seed_rotation=False, settled_axes="", settled="", lever=float("nan"))

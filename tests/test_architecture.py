@@ -24,6 +24,7 @@ LAYERS = (
     ("calibrate",),
     ("target", "peaks", "evaluate"),
     ("evidence",),
+    ("pinning",),
     ("verdict",),
     ("target_verdict", "export"),
     ("qa",),

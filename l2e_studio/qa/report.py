@@ -244,6 +244,9 @@ def verdict_html(v) -> str:
                          for name, c in checks.items() if isinstance(c, dict)], cls="checks"))
     if isinstance(v.get("translation_pinned"), str):
         out.append(f"<p>{_e(v['translation_pinned'])}</p>")
+    lever = v.get("rotation_per_cm_of_seed_translation")
+    if isinstance(lever, dict) and isinstance(lever.get("note"), str):
+        out.append(f"<p>{_e(lever['note'][:1].upper() + lever['note'][1:])}.</p>")
     rotation = v.get("rotation_advice")
     if isinstance(rotation, list) and rotation:
         out.append("<h3>Rotation: what to record or do</h3><ul>" + "".join(f"<li>{_e(a)}</li>" for a in rotation) + "</ul>")

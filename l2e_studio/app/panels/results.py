@@ -130,10 +130,10 @@ VERDICT_MARKS = {"trusted": "✓", "trusted-rotation": "◐", "not-trusted": "�
 def verdict_text(verdict) -> str:
     """The verdict in words, with why (markdown)."""
     head = f"{VERDICT_MARKS[verdict.status]} **Verdict: {verdict.summary()}**"
-    pinned = verdict.pinned()
+    pinned, lever = verdict.pinned(), verdict.lever_line()
     return (head + "".join(f"  \n· {r}" for r in verdict.reasons)
             + (f"  \n= {pinned}" if pinned else "")
-            + "".join(f"  \n→ {a}" for a in verdict.advice()))
+            + "".join(f"  \n→ {a}" for a in ([lever] if lever else []) + verdict.advice()))
 
 
 def accept_style(cancelled: bool, verdict) -> tuple[str, str]:
