@@ -35,6 +35,7 @@ AXIS_ADVICE = {
     "z": "add scenes with near objects at the image's left and right edges",
 }
 
+
 @dataclass(frozen=True)
 class AxisPinned:
     """Whether the scenes pin the translation along one camera axis: the share of the score lost
