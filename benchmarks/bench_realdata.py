@@ -11,7 +11,8 @@ A run is *worse* when its rotation error grows by > 0.1 deg or its translation e
 Also: runs started at the reference, and one-axis sweeps of the new objective (PNG).
 
     python benchmarks/bench_realdata.py [--runs 20] [--rigs all|none|manual,1+2,3,kitti,<folder>...] [--sweeps]
-        [--levels 1,2,5,0] [--synthetic vlp16,hdl32,hdl64,os128 [--synthetic-scenes 1,8]] [--save rows.json]
+        [--levels 1,2,5,0] [--synthetic vlp16,hdl32,hdl64,os128 [--synthetic-scenes 1,8] [--revolutions 3
+        [--phase-locked]]] [--save rows.json]
     python benchmarks/bench_realdata.py --rigs 1+2,kitti_odometry_00 --split 1  # every scan a rig of its own
     python benchmarks/bench_realdata.py --rigs kitti_odometry_00 --sparse 2 1   # its drive as 16- and 32-beam lidars see it
     python benchmarks/bench_realdata.py --rigs kitti_odometry_00 --sparse 2 --width 346  # ... and a DAVIS346-sized camera
@@ -255,6 +256,10 @@ def main() -> None:
     p.add_argument("--synthetic", help="also synthetic rigs (a known truth: an unseen rig's stand-in): spinning "
                                        "lidars, e.g. vlp16,hdl64 (--rigs none: those alone)")
     p.add_argument("--synthetic-scenes", default="1,8", help="scenes per synthetic rig, e.g. 1,8")
+    p.add_argument("--revolutions", type=int, default=1,
+                   help="synthetic rigs: revolutions accumulated into each scene's cloud, as a static rig records")
+    p.add_argument("--phase-locked", action="store_true",
+                   help="... each at the same azimuths (a phase-locked lidar), not interleaved")
     p.add_argument("--split", type=int, default=0,
                    help="every K consecutive scenes of the rigs a rig of their own (1: every scan alone)")
     p.add_argument("--sparse", type=float, nargs="+",
@@ -283,7 +288,8 @@ def main() -> None:
         return
     rigs = load_rigs(args.rigs.split(",")) if args.rigs != "none" else []
     if args.synthetic:
-        rigs += synthetic_rigs(args.synthetic.split(","), [int(k) for k in args.synthetic_scenes.split(",")])
+        rigs += synthetic_rigs(args.synthetic.split(","), [int(k) for k in args.synthetic_scenes.split(",")],
+                               revolutions=args.revolutions, phase_locked=args.phase_locked)
     if args.split:
         rigs = split(rigs, args.split)
     if args.sparse:

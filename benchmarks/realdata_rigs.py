@@ -181,22 +181,26 @@ def perturbations(n: int, deg: float, m: float, rng_seed: int) -> list[tuple[np.
     return out
 
 
-def synthetic_rigs(lidars: list[str], scene_counts: list[int], seed: int = 11) -> list[Rig]:
+def synthetic_rigs(lidars: list[str], scene_counts: list[int], seed: int = 11, revolutions: int = 1,
+                   phase_locked: bool = False) -> list[Rig]:
     """Rigs of synthetic garage scenes with a known truth, as an unseen rig's stand-in: camera
     images with every failure mode of real ones (``--realism``), seen by the spinning lidar
     ``lidars`` (``synth.lidars.LIDARS`` names) in ``scene_counts`` scenes each (built in memory;
-    the reference is the truth)."""
+    the reference is the truth); each scene's cloud ``revolutions`` of the lidar accumulated (at
+    phases of their own, or one with ``phase_locked``), as a static rig records."""
     from l2e_studio.synth.dataset import SynthConfig, make_rig, make_scene
 
     rigs = []
+    tag = "" if revolutions == 1 else f"_x{revolutions}" + ("locked" if phase_locked else "")
     for lidar in lidars:
         for n in scene_counts:
-            config = SynthConfig(n_scenes=n, map_kind="image", realism=True, lidar=lidar, seed=seed)
+            config = SynthConfig(n_scenes=n, map_kind="image", realism=True, lidar=lidar, seed=seed,
+                                 lidar_sweeps=revolutions, lidar_phase_locked=phase_locked)
             camera, truth, _ = make_rig(config)
             scenes = []
             for i in range(n):
                 points, intensity, grey = make_scene(config, i, truth, camera)
                 scenes.append(Scene(f"scene_{i:03d}", points, intensity, grey.astype(np.float32), "image"))
-            rigs.append(Rig(f"synth_{lidar}_{n}", camera, truth, tuple(scenes)))
+            rigs.append(Rig(f"synth_{lidar}_{n}{tag}", camera, truth, tuple(scenes)))
     return rigs
 

@@ -76,6 +76,11 @@ class SynthConfig:
     #: a spinning lidar's rings (a name of ``lidars.LIDARS``: vlp16, hdl32, ...) within the lidar's
     #: horizontal field of view, instead of the MEMS raster (``points_per_scan`` then unused)
     lidar: str | None = None
+    #: revolutions of that lidar accumulated into each scene's cloud, as a static rig's recording
+    #: is: each at a firing phase of its own (a free-running lidar: the sweeps interleave), or at
+    #: one (``lidar_phase_locked``: the same azimuths each time, a return per revolution)
+    lidar_sweeps: int = 1
+    lidar_phase_locked: bool = False
 
     def __post_init__(self) -> None:
         if self.n_scenes < 1 or self.width < 16 or self.height < 16 or self.points_per_scan < 100:
@@ -96,6 +101,8 @@ class SynthConfig:
             raise ValueError("intensity_scale must be in (0, 1]")
         if self.lidar is not None and self.lidar not in LIDARS:
             raise ValueError(f"lidar must be one of {', '.join(LIDARS)}")
+        if self.lidar_sweeps < 1:
+            raise ValueError("lidar_sweeps must be >= 1")
 
     @property
     def active_traps(self) -> tuple[str, ...]:
@@ -141,7 +148,11 @@ def lidar_directions(config: SynthConfig, rng: np.random.Generator) -> np.ndarra
     the rings of ``config.lidar`` within the horizontal field of view."""
     if config.lidar is not None:
         spec = LIDARS[config.lidar]
-        return ring_directions(spec["elevations_deg"], spec["azimuth_step_deg"], rng, config.lidar_hfov_deg)[0]
+        first = ring_directions(spec["elevations_deg"], spec["azimuth_step_deg"], rng, config.lidar_hfov_deg)[0]
+        more = [first if config.lidar_phase_locked else
+                ring_directions(spec["elevations_deg"], spec["azimuth_step_deg"], rng, config.lidar_hfov_deg)[0]
+                for _ in range(config.lidar_sweeps - 1)]
+        return np.concatenate([first, *more]) if more else first
     aspect = config.lidar_hfov_deg / config.lidar_vfov_deg
     n_h = max(2, int(round(np.sqrt(config.points_per_scan * aspect))))
     n_v = max(2, int(round(config.points_per_scan / n_h)))
