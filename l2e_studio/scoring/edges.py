@@ -60,6 +60,10 @@ GAP_OUTSIDE_DEG = 90.0
 #: own copies: KITTI odometry's scans, each three times over (range noise 2 cm), calibrated 0.18
 #: deg from the reference instead of 0.02, and 60 % of their points read as silhouettes.
 SAME_DIRECTION_DEG = 0.02
+#: ... where at least this share of the returns repeats a direction: a single sweep has a few
+#: beams that nearly coincide (tens in a KITTI or OpenCalib scan of 20-125k points), which are no
+#: accumulation and are weighed as they are.
+REPEATED_SHARE = 0.01
 #: A silhouette's weight (a full depth edge's is 1). Half: silhouettes are mostly far (a skyline), which
 #: pins the rotation and not the translation; at full weight KITTI odometry's halves climbed back
 #: along the forward axis to 1.6 cm instead of 0.7 (its translation no longer trusted), at half weight
@@ -78,17 +82,17 @@ SCALE = 127.0
 
 
 def lidar_edge_weights(points: np.ndarray, intensity: np.ndarray) -> np.ndarray:
-    """(N,) weights in [0, 1] (:func:`sample_edge_weights`), one sample per direction: returns
-    within :data:`SAME_DIRECTION_DEG` of one another are one sample, whose nearest return is
-    weighed; the others take its weight where they lie on its surface (within a depth edge's
-    jump of it: an accumulated sweep's copy), else none (a later return from a surface behind,
-    which the camera sees elsewhere). A cloud without repeated directions is weighed as it is."""
+    """(N,) weights in [0, 1] (:func:`sample_edge_weights`), one sample per direction: where a
+    cloud repeats directions (:data:`REPEATED_SHARE`), returns within :data:`SAME_DIRECTION_DEG`
+    of one another are one sample, whose nearest return is weighed; the others take its weight
+    where they lie on its surface (within a depth edge's jump of it: an accumulated sweep's
+    copy), else none (a later return from a surface behind, which the camera sees elsewhere)."""
     P = np.asarray(points, dtype=np.float64)
     r, ok, d = _directions(P)
     tree = cKDTree(d)
     pairs = tree.query_pairs(2 * np.sin(np.radians(SAME_DIRECTION_DEG) / 2), output_type="ndarray")
     pairs = pairs[ok[pairs].all(axis=1)]  # (points without a direction all sit at the origin)
-    if len(pairs) == 0:
+    if len(np.unique(pairs)) < REPEATED_SHARE * ok.sum():
         return sample_edge_weights(P, intensity, (r, ok, d, tree))
     n = len(P)
     _, label = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)),
