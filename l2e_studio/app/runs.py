@@ -113,7 +113,8 @@ class Runner:
         self._ticker: Ticker | None = None
         self._method: Method | None = None
         self._run_id, self._mask = 0, np.zeros(0, dtype=bool)
-        self._scored_best: Extrinsic | None = None  # the last best point put on the common-scale curve
+        #: the last best point put on the common-scale curve, and its score there
+        self._scored_best: tuple[Extrinsic | None, float] = (None, float("nan"))
         # the curve points the run's thread asks for (each stage's start, the result), in order,
         # scored by the ticker: the run's thread never waits on the readout, so Cancel stops it at once
         self._pending: list[tuple[Extrinsic, int]] = []
@@ -131,7 +132,7 @@ class Runner:
         snap = app.state.snapshot()
         cancel = threading.Event()
         self._cancel, self._method = cancel, method
-        self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), None
+        self._run_id, self._mask, self._scored_best = run_id, np.asarray(snap.included, dtype=bool), (None, float("nan"))
         self._pending = []
         self._score_best()  # the curve starts at the seed, on the readout's scale
 
@@ -211,14 +212,18 @@ class Runner:
         own objective scores the same point differently: its smoothing, map scale and points)."""
         run = self.app.state.snapshot().run
         best = best if best is not None else run.best
-        if best is None or best is self._scored_best:
+        if best is None:
             return
-        self._scored_best = best
+        if best is self._scored_best[0]:  # the search's best stands (a multi-start search keeps it
+            if evaluations is not None:  # through later climbs): asked for a point, it stays level
+                self.app.state.record_best_score(self._run_id, evaluations, self._scored_best[1])
+            return
         try:
             score = self.app.readout.read(best, self._mask).total
         except Exception:  # a curve point is not worth failing the run over
             log.exception("scoring the best point failed")
             return
+        self._scored_best = (best, score)
         self.app.state.record_best_score(self._run_id, run.evaluations if evaluations is None else evaluations, score)
 
     def _ask_curve_point(self, best: Extrinsic, evaluations: int) -> None:
