@@ -32,7 +32,12 @@ each failed check gives one line of why.
 A trusted result is handed back only as far as it moved significantly: where the rotation turned,
 or the translation moved along an axis, by less than twice the spread of the independent
 estimates (the halves refined alone, the second start), the seed's stands (:func:`settle`), and
-the verdict says so. A seed already at the peak is confirmed, not nudged by the estimate's scatter.
+the verdict says so. A seed already at the peak is confirmed, not nudged by the estimate's scatter;
+for such a move the halves are not asked which of the two they prefer (:func:`null_move`).
+
+A rotation handed back with the seed's translation is only as good as that translation: the
+verdict says how far it turns per centimetre the translation is off sideways
+(:func:`l2e_studio.pinning.rotation_lever`) and how well to measure it.
 """
 
 from __future__ import annotations
@@ -272,6 +277,11 @@ class Verdict:
         }
 
 
+def _sd(deviations: float) -> str:
+    """Standard deviations to one decimal, a small negative as 0.0 (not -0.0)."""
+    return f"{round(deviations, 1) + 0.0:.1f}"
+
+
 def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
            sides: Sequence[SceneStack]) -> tuple[Extrinsic, bool, str, str]:
     """``handed`` with the seed's rotation, and the seed's translation along the axes outside
@@ -297,7 +307,7 @@ def settle(seed: Extrinsic, handed: Extrinsic, seed_axes: str, spread: Spread,
         return seed, True, "".join(a for a, k in zip("xyz", mine) if k), "the optimiser ended at the seed itself"
     if spread.rise < SIGNIFICANT:  # (nan: not measured, never under)
         return seed, True, "".join(a for a, k in zip("xyz", mine) if k), (
-            f"the result scores only {round(spread.rise, 1) + 0.0:.1f} standard deviations of the score's own fluctuations above the "
+            f"the result scores only {_sd(spread.rise)} standard deviations of the score's own fluctuations above the "
             f"seed (at least {SIGNIFICANT:g} to tell them apart)")
     keep_t = mine & ~(moved > SIGNIFICANT * spread.m)  # (a spread of nan keeps only what did not move)
     shown_rot, shown_t = keep_rot and turn > 1e-9, keep_t & (moved > 1e-12)  # kept, and not the same anyway
@@ -347,7 +357,7 @@ def null_move(checks: Sequence[Check], seed: Extrinsic, res: Extrinsic, spread: 
         return list(checks)
     why = (f"within {SIGNIFICANT:g}x the {spread.deg:.3f} deg" + ("" if np.isnan(spread.m) else f" / {100 * spread.m:.1f} cm")
            + " its independent estimates spread" if within else
-           f"its score {round(spread.rise, 1) + 0.0:.1f} standard deviations of the landscape's fluctuations above the seed's")
+           f"its score {_sd(spread.rise)} standard deviations of the landscape's fluctuations above the seed's")
     note = (f"; the move from the seed is no move the data can tell (turned {turn:.3f} deg, moved {100 * moved.max():.1f} cm, "
             f"{why}): the halves cannot prefer either")
     return [replace(c, passed=True, detail=c.detail + note)
